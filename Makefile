@@ -1,0 +1,53 @@
+# semlab: one entry point for setting up, running the workbench and testing.
+#   make lab    - create .venv, install semlab with its extras, register the kernel, start JupyterLab
+#   make test   - same set-up, then the whole test suite (notebooks and the browser test included)
+# Second runs reinstall nothing unless pyproject.toml changed.
+
+PYTHON ?= $(shell command -v python3.11 2>/dev/null || command -v python3)
+VENV   := .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.semlab-installed
+ARGS   ?=
+PYTEST_ARGS ?=
+
+.PHONY: setup lab test test-fast bench chromium strip lint clean
+
+setup: $(STAMP)
+
+$(STAMP): pyproject.toml
+	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check -e '.[dev]'
+	$(BIN)/python -m ipykernel install --sys-prefix --name python3 --display-name "Python 3 (semlab)" >/dev/null
+	@touch $(STAMP)
+
+lab: $(STAMP)
+	$(BIN)/jupyter lab --notebook-dir=notebooks --ServerApp.ip=127.0.0.1 $(ARGS)
+
+# Debian's chromium drives the browser test; install it when missing and we may (root or sudo).
+chromium:
+	@command -v chromium >/dev/null 2>&1 || { \
+	  if [ "$$(id -u)" = 0 ]; then SUDO=; elif command -v sudo >/dev/null 2>&1; then SUDO=sudo; else \
+	    echo "chromium is missing and cannot be installed without root: the browser test will be skipped"; exit 0; fi; \
+	  echo "installing Debian's chromium for the browser test"; \
+	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq chromium >/dev/null; }
+
+test: $(STAMP) chromium
+	SEMLAB_FAST=1 MPLBACKEND=Agg $(BIN)/python -m pytest $(PYTEST_ARGS)
+
+# The unit tests alone (no notebooks, no browser): the quick loop while developing.
+test-fast: $(STAMP)
+	$(BIN)/python -m pytest -m "not notebooks and not browser" $(PYTEST_ARGS)
+
+bench: $(STAMP)
+	$(BIN)/python benchmarks/bench_sim.py
+	$(BIN)/python benchmarks/bench_tracking.py
+	$(BIN)/python benchmarks/bench_servo.py
+
+strip: $(STAMP)
+	$(BIN)/nbstripout notebooks/*.ipynb
+
+lint: $(STAMP)
+	$(BIN)/ruff check semlab tests benchmarks
+
+clean:
+	rm -rf $(VENV) .pytest_cache build *.egg-info

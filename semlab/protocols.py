@@ -1,0 +1,93 @@
+"""Interfaces that a real instrument can implement as well as the simulated rig.
+
+The tracker and the visual servo talk to hardware only through these two
+protocols, so the same code drives :class:`semlab.sim.SimulatedRig` today and a
+real SEM frame grabber and manipulator DAC tomorrow.
+
+Conventions
+-----------
+Frames are 2-D arrays indexed ``frame[y, x]``; pixel centres sit at integer
+coordinates, x grows to the right and y downwards.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+__all__ = ["Microscope", "Axis", "check_command"]
+
+
+@runtime_checkable
+class Microscope(Protocol):
+    """A source of SEM frames at a fixed frame period.
+
+    Attributes
+    ----------
+    frame_period : float
+        Seconds between two frames (the paper's rig: 1/13 s at 640x480).
+    """
+
+    frame_period: float
+
+    def grab(self) -> np.ndarray:
+        """Return the next frame as a 2-D array (in simulation: advance the clock one frame)."""
+        ...
+
+
+@runtime_checkable
+class Axis(Protocol):
+    """One actuator channel, e.g. the x piezo of a manipulator driven by a DAC.
+
+    Attributes
+    ----------
+    limits : tuple of float
+        ``(U0, Un)``, the lowest and highest command in volts.
+    """
+
+    limits: tuple[float, float]
+
+    def apply(self, volts: float) -> None:
+        """Command ``volts``; it takes effect from the next frame.
+
+        Raises
+        ------
+        ValueError
+            If ``volts`` is NaN/inf or outside ``limits``: an axis never drives past its limits.
+        """
+        ...
+
+
+def check_command(volts: float, limits: tuple[float, float], name: str = "axis") -> float:
+    """Validate an actuator command against the axis limits.
+
+    Parameters
+    ----------
+    volts : float
+        The requested command.
+    limits : (float, float)
+        ``(U0, Un)`` of the axis.
+    name : str
+        Used in the error message.
+
+    Returns
+    -------
+    float
+        ``volts`` as a Python float.
+
+    Raises
+    ------
+    ValueError
+        If the command is not finite or lies outside the limits.
+    """
+    try:
+        value = float(volts)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name}: command {volts!r} is not a number") from None
+    if not np.isfinite(value):
+        raise ValueError(f"{name}: command {value} is not finite; refusing to drive blind")
+    lo, hi = limits
+    if not lo <= value <= hi:
+        raise ValueError(f"{name}: command {value:.6g} V is outside the axis limits [{lo:.6g}, {hi:.6g}] V")
+    return value
