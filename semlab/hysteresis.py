@@ -1,0 +1,1015 @@
+"""Piezo hysteresis: characterisation by visual tracking, models and their inverses.
+
+The paper (Ru et al., "Visual Servo Control Incorporating a Feed-Forward Controller", Fig. 8)
+characterises one piezo axis by applying voltages incrementally from U0 to Un and back while the visual
+tracker records the probe displacement, fits the ascending and descending major branches Pn(u), Dn(u)
+with fourth-order polynomials, describes curves that start at a reversal inside the loop with eq. 11,
+and inverts the model by Newton-Raphson to obtain the feed-forward command.
+
+This module provides
+
+* :func:`characterise_hysteresis` -- the experiment of Fig. 8b on any :class:`~semlab.protocols.Microscope`
+  / :class:`~semlab.protocols.Axis` pair, with inner loops, the displacement measured by the tracker;
+* :class:`PolynomialHysteresis` -- Pn, Dn, eq. 11, its mirror for reversals on the ascending branch,
+  reversal-point memory (wiping-out) and the Newton-Raphson inverse;
+* :class:`PIHysteresis` -- a Prandtl-Ishlinskii model (play operators, weights by bounded/non-negative
+  least squares) with the analytic inverse of Krejci & Kuhnen (2001), the paper's recommendation for a
+  more accurate model;
+* :func:`fit_hysteresis` -- fits either model to a characterisation.
+
+Both models share one interface: ``forward`` (commit voltages, return displacements), ``displacement``
+(peek), ``inverse`` (voltage that produces a desired displacement from the current memory state),
+``reset``, ``state``, ``check_axis``, ``u_range`` and ``displacement_range``.
+
+Displacements are in image pixels along the measured image direction of the axis; the sign is chosen
+so that rising voltage increases the displacement.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+__all__ = [
+    "BRANCHES",
+    "HysteresisModel",
+    "HysteresisState",
+    "PIHysteresis",
+    "PolynomialHysteresis",
+    "axis_identity",
+    "characterisation_voltages",
+    "characterise_hysteresis",
+    "fit_hysteresis",
+    "inner_loop_displacement",
+    "label_branches",
+    "play_operator",
+]
+
+#: Branch labels used in a characterisation DataFrame.
+BRANCHES = ("ascending", "descending", "inner_ascending", "inner_descending")
+
+#: Default turning points (fractions of the range) after the major loop. The path reverses on the
+#: ascending branch (mirror of eq. 11), nests a second and third-order loop that closes again, then
+#: reverses on the descending branch (eq. 11 itself) and nests once more.
+DEFAULT_INNER_TURNS = (0.75, 0.25, 0.6, 0.4, 1.0, 0.3, 0.8, 0.5, 0.0)
+
+
+# ---------------------------------------------------------------------------------------------
+# helpers
+# ---------------------------------------------------------------------------------------------
+
+
+def axis_identity(axis) -> str:
+    """A string that identifies an actuator axis, used to refuse a model fitted on another axis.
+
+    The axis' ``name`` (or ``id``/``label``) attribute is used when it has one; otherwise the Python
+    object identity, which is only valid within one session.
+    """
+    if isinstance(axis, str):
+        return axis
+    for attr in ("name", "id", "label"):
+        value = getattr(axis, attr, None)
+        if value is not None and not callable(value):
+            return str(value)
+    return f"{type(axis).__name__}@{id(axis):x}"
+
+
+def _finite(value, what: str) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{what} {value!r} is not a number") from None
+    if not math.isfinite(v):
+        raise ValueError(f"{what} is {v}; a finite number is required")
+    return v
+
+
+def play_operator(u, r: float, z0: float | None = None) -> np.ndarray:
+    """Output of the play (backlash) operator of threshold ``r`` for an input sequence.
+
+    ``z_k = max(u_k - r, min(u_k + r, z_{k-1}))``, the elementary hysteron of the Prandtl-Ishlinskii
+    model.
+
+    Parameters
+    ----------
+    u : (N,) array_like
+        Input sequence.
+    r : float
+        Threshold (half the backlash width), ``r >= 0``.
+    z0 : float, optional
+        Initial state; default ``u[0]`` clipped into ``[u0 - r, u0 + r]`` (i.e. ``u[0]``).
+
+    Returns
+    -------
+    (N,) ndarray
+    """
+    u = np.asarray(u, dtype=float)
+    if r < 0:
+        raise ValueError(f"play operator threshold r={r} must be >= 0")
+    out = np.empty_like(u)
+    z = u[0] if z0 is None else float(z0)
+    for k, uk in enumerate(u):
+        z = max(uk - r, min(uk + r, z))
+        out[k] = z
+    return out
+
+
+def label_branches(voltages, u_min: float, u_max: float) -> list[str]:
+    """Label each voltage of a path with its hysteresis branch, using the wiping-out rule.
+
+    A point is on a major branch (``'ascending'``/``'descending'``) when no reversal point inside the
+    range is remembered, otherwise on an inner curve (``'inner_ascending'``/``'inner_descending'``).
+    The path is assumed to start at ``u_min`` after a descent (the preconditioned state).
+    """
+    u_prev, rising, stack = float(u_min), True, []
+    labels = []
+    for u in np.asarray(voltages, dtype=float):
+        if u != u_prev:
+            now_rising = u > u_prev
+            if now_rising != rising and u_min < u_prev < u_max:
+                stack.append(u_prev)
+            rising = now_rising
+            # wiping-out: passing the remembered turning point of the opposite kind closes the loop
+            while len(stack) >= 2 and ((rising and u >= stack[-2]) or (not rising and u <= stack[-2])):
+                del stack[-2:]
+            if u <= u_min or u >= u_max:
+                stack.clear()
+            u_prev = float(u)
+        major = not stack
+        labels.append(("" if major else "inner_") + ("ascending" if rising else "descending"))
+    return labels
+
+
+def characterisation_voltages(u_min: float, u_max: float, n_steps: int = 30, inner_loops=True) -> pd.DataFrame:
+    """The voltage path of a characterisation (paper, Fig. 8b), without applying it.
+
+    Parameters
+    ----------
+    u_min, u_max : float
+        ``U0`` and ``Un`` in volts.
+    n_steps : int
+        Increments per major branch (the step is ``(Un - U0) / n_steps``).
+    inner_loops : bool or sequence of float
+        ``True`` appends :data:`DEFAULT_INNER_TURNS` (turning points as fractions of the range) after
+        the major loop, ``False`` only the major loop; a sequence gives the turning points explicitly.
+
+    Returns
+    -------
+    DataFrame
+        Columns ``step, segment, u, branch``. Segment 0 is the ascending major branch, 1 the
+        descending one, 2... the inner-loop segments.
+    """
+    u_min, u_max = _finite(u_min, "u_min"), _finite(u_max, "u_max")
+    if not u_min < u_max:
+        raise ValueError(f"u_min={u_min} must be below u_max={u_max}")
+    n_steps = int(n_steps)
+    if n_steps < 2:
+        raise ValueError(f"n_steps={n_steps}: at least 2 increments per branch are needed")
+    turns = [1.0, 0.0]
+    if inner_loops is True:
+        turns += list(DEFAULT_INNER_TURNS)
+    elif inner_loops not in (False, None):
+        turns += [float(f) for f in inner_loops]
+    if any(not 0.0 <= f <= 1.0 for f in turns):
+        raise ValueError(f"inner-loop turning points must be fractions in [0, 1], got {turns}")
+    span = u_max - u_min
+    us, segs = [], []
+    f_prev = 0.0
+    for seg, f in enumerate(turns):
+        n = max(1, int(round(abs(f - f_prev) * n_steps)))
+        fr = np.linspace(f_prev, f, n + 1)[1:]
+        us.extend(u_min + fr * span)
+        segs.extend([seg] * n)
+        f_prev = f
+    # the very first point: U0 itself, on the ascending major branch
+    us = [u_min] + us
+    segs = [0] + segs
+    u = np.clip(np.asarray(us), u_min, u_max)
+    return pd.DataFrame(
+        {"step": np.arange(len(u)), "segment": segs, "u": u, "branch": label_branches(u, u_min, u_max)}
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+# the models
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclass
+class HysteresisState:
+    """Memory of a hysteresis model.
+
+    Attributes
+    ----------
+    u : float
+        Last committed voltage.
+    y : float
+        Displacement there (px).
+    rising : bool
+        Direction of the last voltage change.
+    reversals : list of (float, float)
+        Remembered reversal points ``(u, y)`` inside the range, oldest first (polynomial model); they
+        alternate maxima and minima and are wiped out when the voltage passes them (closure of a loop).
+    plays : ndarray or None
+        Play-operator states (Prandtl-Ishlinskii model).
+    """
+
+    u: float
+    y: float
+    rising: bool = True
+    reversals: list = field(default_factory=list)
+    plays: np.ndarray | None = None
+
+
+class HysteresisModel:
+    """Common interface of the hysteresis models (see the module docstring).
+
+    Attributes
+    ----------
+    kind : str
+        ``"polynomial"`` or ``"pi"``.
+    axis : str
+        Identity of the axis the model was fitted on (see :func:`axis_identity`).
+    direction : (float, float)
+        Unit vector of the image direction in which rising voltage moves the probe.
+    u_range : (float, float)
+        ``(U0, Un)`` of the characterisation; the model is valid only inside it.
+    """
+
+    kind = "base"
+
+    def __init__(self, u_range, *, axis="unknown", direction=(1.0, 0.0), meta=None):
+        u0, un = (_finite(v, "model range bound") for v in u_range)
+        if not u0 < un:
+            raise ValueError(f"model voltage range {u_range} is empty")
+        self.u_range = (u0, un)
+        self.axis = axis_identity(axis)
+        d = np.asarray(direction, dtype=float)
+        if d.shape != (2,) or not np.all(np.isfinite(d)) or np.hypot(*d) == 0:
+            raise ValueError(f"direction {direction!r} must be a non-zero 2-vector")
+        self.direction = tuple(d / np.hypot(*d))
+        self.meta = dict(meta or {})
+        self.state = None
+        self.reset()
+
+    # -- interface to be provided by subclasses -------------------------------------------------
+    def _major(self, u: float, rising: bool) -> float:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _advance(self, state: HysteresisState, u: float) -> HysteresisState:  # pragma: no cover
+        raise NotImplementedError
+
+    def inverse(self, target: float) -> float:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    # -- shared behaviour -----------------------------------------------------------------------
+    @property
+    def displacement_range(self) -> tuple[float, float]:
+        """Displacements at U0 and Un (px): the range any target must lie in."""
+        return (self._major(self.u_range[0], True), self._major(self.u_range[1], True))
+
+    @property
+    def gain(self) -> float:
+        """Mean slope of the loop, px per volt (the 'linear fit' of the paper)."""
+        lo, hi = self.displacement_range
+        return (hi - lo) / (self.u_range[1] - self.u_range[0])
+
+    def reset(self, u: float | None = None, branch: str = "ascending") -> HysteresisState:
+        """Forget all reversals and put the model on a major branch.
+
+        Parameters
+        ----------
+        u : float, optional
+            Voltage; default ``U0`` (the state after a descent to U0, as after a characterisation).
+        branch : {"ascending", "descending"}
+            Major branch the actuator is on (how ``u`` was approached).
+        """
+        if branch not in ("ascending", "descending"):
+            raise ValueError(f"branch must be 'ascending' or 'descending', got {branch!r}")
+        u = self.u_range[0] if u is None else self._check_u(u)
+        self.state = self._major_state(u, branch == "ascending")
+        return self.state
+
+    def _major_state(self, u: float, rising: bool) -> HysteresisState:
+        return HysteresisState(u=u, y=self._major(u, rising), rising=rising)
+
+    def _check_u(self, u) -> float:
+        u = _finite(u, "voltage")
+        lo, hi = self.u_range
+        tol = 1e-9 * (hi - lo)
+        if not lo - tol <= u <= hi + tol:
+            raise ValueError(f"voltage {u:.6g} V is outside the model's range [{lo:.6g}, {hi:.6g}] V")
+        return min(max(u, lo), hi)
+
+    def _check_target(self, target) -> float:
+        y = _finite(target, "target displacement")
+        lo, hi = self.displacement_range
+        tol = 1e-9 * max(1.0, hi - lo)
+        if not lo - tol <= y <= hi + tol:
+            raise ValueError(
+                f"target displacement {y:.4g} px is outside the model's range [{lo:.4g}, {hi:.4g}] px "
+                f"(voltages {self.u_range[0]:.4g}..{self.u_range[1]:.4g} V)"
+            )
+        return min(max(y, lo), hi)
+
+    def forward(self, voltages) -> np.ndarray | float:
+        """Commit voltage(s) in order and return the displacement(s) they produce (px).
+
+        The memory (reversal points / play states) is updated, so a model used as the shadow of an
+        axis must see every command sent to that axis.
+        """
+        scalar = np.ndim(voltages) == 0
+        out = []
+        for u in np.atleast_1d(np.asarray(voltages, dtype=float)):
+            self.state = self._advance(self.state, self._check_u(u))
+            out.append(self.state.y)
+        return out[0] if scalar else np.asarray(out)
+
+    def displacement(self, u: float) -> float:
+        """Displacement a move from the current state to ``u`` would produce, without committing it."""
+        return self._advance(copy.deepcopy(self.state), self._check_u(u)).y
+
+    def predict(self, voltages, *, reset: bool | tuple = True) -> np.ndarray:
+        """Displacements for a voltage sequence, on a copy of the model (the model is untouched).
+
+        Parameters
+        ----------
+        voltages : (N,) array_like
+        reset : bool or (float, str)
+            ``True`` starts from the reset state (U0 after a descent), ``False`` from the current state,
+            a tuple ``(u, branch)`` from that major-branch state.
+        """
+        m = self.copy()
+        if reset is True:
+            m.reset()
+        elif reset:
+            m.reset(*reset)
+        return np.atleast_1d(m.forward(np.atleast_1d(voltages)))
+
+    def replay(self, characterisation: pd.DataFrame) -> np.ndarray:
+        """Predicted displacement for each row of a characterisation (starting from U0 after a descent)."""
+        return self.predict(characterisation["u"].to_numpy(float), reset=True)
+
+    def copy(self) -> HysteresisModel:
+        """A deep copy (its own memory)."""
+        return copy.deepcopy(self)
+
+    def check_axis(self, axis) -> None:
+        """Raise ValueError if ``axis`` is not the axis this model was fitted on."""
+        ident = axis_identity(axis)
+        if ident != self.axis:
+            raise ValueError(
+                f"this {self.kind} hysteresis model was fitted on axis {self.axis!r}, not on {ident!r}; "
+                "characterise this axis and fit a model for it"
+            )
+
+    def __repr__(self) -> str:
+        lo, hi = self.displacement_range
+        return (
+            f"<{type(self).__name__} axis={self.axis!r} u={self.u_range[0]:.4g}..{self.u_range[1]:.4g} V "
+            f"displacement={lo:.4g}..{hi:.4g} px direction=({self.direction[0]:.3f}, {self.direction[1]:.3f})>"
+        )
+
+
+def inner_loop_displacement(u, origin, end, ascending_branch, descending_branch, u_range, *, derivative=False):
+    """Displacement on a curve that starts at a reversal point, the paper's eq. 11 generalised.
+
+    For a reversal at ``origin = (u1, y1)`` on the descending branch with the voltage then rising, the
+    paper gives (eq. 11)
+
+    .. math:: P_1(u) = k\\,P_n\\big(U_n + (u - U_n)/m\\big) + D_n(u_1) - k\\,P_n(U_0),
+
+    :math:`k = (D_n(U_n) - D_n(u_1)) / (D_n(U_n) - D_n(U_0))`. As printed, :math:`m = (U_n - u_1)/(U_n - U_0)`
+    multiplies :math:`(u - U_n)`, which does not give :math:`P_1(u_1) = D_n(u_1)`; the dashed curve of
+    Fig. 8b starts at the reversal point, so the argument must map :math:`[u_1, U_n]` onto
+    :math:`[U_0, U_n]`, i.e. divide by that :math:`m` (equivalently multiply by its reciprocal). That is
+    the form implemented. The curve is the ascending major branch scaled into the box between the
+    reversal point and the point where the loop closes (``end``, here :math:`(U_n, D_n(U_n))`).
+
+    The same construction with the descending branch gives the mirror case the paper only names
+    (voltage falling after a reversal on the ascending branch), and with ``end`` an older reversal point
+    it gives nested (higher-order) loops.
+
+    Parameters
+    ----------
+    u : float or ndarray
+        Voltage(s) between ``origin[0]`` and ``end[0]``.
+    origin, end : (float, float)
+        ``(u, y)`` of the reversal point and of the closure point.
+    ascending_branch, descending_branch : callable
+        :math:`P_n(u)` and :math:`D_n(u)` (vectorised); with ``derivative=True`` they must accept a
+        ``deriv`` keyword returning the derivative.
+    u_range : (float, float)
+        ``(U0, Un)``.
+    derivative : bool
+        Also return :math:`dy/du`.
+
+    Returns
+    -------
+    y or (y, dy_du)
+    """
+    U0, Un = u_range
+    (u1, y1), (u2, y2) = origin, end
+    u = np.asarray(u, dtype=float)
+    if u2 > u1:  # rising voltage: scaled ascending branch
+        scale = (Un - U0) / (u2 - u1)
+        s = U0 + (u - u1) * scale
+        p0, pn = ascending_branch(U0), ascending_branch(Un)
+        y = y1 + (y2 - y1) * (ascending_branch(s) - p0) / (pn - p0)
+        if derivative:
+            dy = (y2 - y1) * ascending_branch(s, deriv=1) * scale / (pn - p0)
+    elif u2 < u1:  # falling voltage: scaled descending branch
+        scale = (Un - U0) / (u1 - u2)
+        s = Un - (u1 - u) * scale
+        d0, dn = descending_branch(U0), descending_branch(Un)
+        y = y1 + (y2 - y1) * (dn - descending_branch(s)) / (dn - d0)
+        if derivative:
+            dy = (y1 - y2) * descending_branch(s, deriv=1) * scale / (dn - d0)
+    else:
+        y = np.full_like(u, y1)
+        dy = np.zeros_like(u)
+    if y.ndim == 0:
+        y = float(y)
+        if derivative:
+            dy = float(dy)
+    return (y, dy) if derivative else y
+
+
+def _newton_bisect(f, lo: float, hi: float, target: float, *, xtol: float, maxiter: int = 60) -> float:
+    """Solve ``f(x)[0] = target`` for x in [lo, hi] with f increasing: Newton-Raphson steps, kept
+    inside the bracket (bisection when a step leaves it or the slope vanishes)."""
+    flo, fhi = f(lo)[0] - target, f(hi)[0] - target
+    if flo >= 0:
+        return lo
+    if fhi <= 0:
+        return hi
+    x = lo + (hi - lo) * (-flo) / (fhi - flo)  # secant start
+    for _ in range(maxiter):
+        y, dy = f(x)
+        g = y - target
+        if g > 0:
+            hi = x
+        else:
+            lo = x
+        if abs(g) < 1e-12 or hi - lo < xtol:
+            return x
+        x_new = x - g / dy if dy > 0 else None
+        if x_new is None or not lo < x_new < hi:
+            x_new = 0.5 * (lo + hi)
+        if abs(x_new - x) < xtol:
+            return x_new
+        x = x_new
+    return x
+
+
+class PolynomialHysteresis(HysteresisModel):
+    """The paper's model: 4th-order major branches, eq. 11 inner curves, reversal memory, NR inverse.
+
+    Parameters
+    ----------
+    ascending_coef, descending_coef : array_like
+        Polynomial coefficients (lowest order first) of :math:`P_n` and :math:`D_n` in the normalised
+        voltage ``s = (u - U0) / (Un - U0)``.
+    u_range : (float, float)
+        ``(U0, Un)``.
+    axis, direction, meta
+        See :class:`HysteresisModel`.
+
+    Notes
+    -----
+    Memory follows the wiping-out rule: every reversal inside the range is pushed on a stack; a curve
+    starting at the newest reversal point heads for the previous one (or the end of the major loop),
+    and passing it closes that inner loop, whose two points are forgotten. At the ends of the range all
+    memory is wiped out. The inverse solves the monotonic path from the current state by Newton-Raphson
+    on the (analytic) derivative of the active curve.
+    """
+
+    kind = "polynomial"
+
+    def __init__(self, ascending_coef, descending_coef, u_range, **kw):
+        self._P = np.polynomial.Polynomial(np.asarray(ascending_coef, dtype=float))
+        self._D = np.polynomial.Polynomial(np.asarray(descending_coef, dtype=float))
+        self._dP, self._dD = self._P.deriv(), self._D.deriv()
+        self._u0, self._un = float(u_range[0]), float(u_range[1])
+        super().__init__(u_range, **kw)
+        p0, pn = self._P(0.0), self._P(1.0)
+        if not pn > p0:
+            raise ValueError("ascending branch does not rise over the range: not a usable hysteresis model")
+
+    # major branches in volts ------------------------------------------------------------------
+    def ascending(self, u, deriv: int = 0):
+        """:math:`P_n(u)` (or its derivative in px/V)."""
+        s = (np.asarray(u, dtype=float) - self._u0) / (self._un - self._u0)
+        return self._P(s) if not deriv else self._dP(s) / (self._un - self._u0)
+
+    def descending(self, u, deriv: int = 0):
+        """:math:`D_n(u)` (or its derivative in px/V)."""
+        s = (np.asarray(u, dtype=float) - self._u0) / (self._un - self._u0)
+        return self._D(s) if not deriv else self._dD(s) / (self._un - self._u0)
+
+    def _major(self, u, rising):
+        return float(self.ascending(u) if rising else self.descending(u))
+
+    def _ends(self):
+        U0, Un = self.u_range
+        return (U0, float(self.ascending(U0))), (Un, float(self.ascending(Un)))
+
+    def _curve(self, reversals, rising):
+        """(origin, end) of the active curve for a direction, given the reversal stack."""
+        low, high = self._ends()
+        if not reversals:
+            return (low, high) if rising else (high, low)
+        origin = reversals[-1]
+        if len(reversals) >= 2:
+            end = reversals[-2]
+        else:
+            end = high if rising else low
+        return origin, end
+
+    def _eval(self, origin, end, u, derivative=False):
+        if origin[0] == self.u_range[0] and end[0] == self.u_range[1]:
+            y = float(self.ascending(u))  # exactly Pn on the major branch
+            return (y, float(self.ascending(u, deriv=1))) if derivative else y
+        if origin[0] == self.u_range[1] and end[0] == self.u_range[0]:
+            y = float(self.descending(u))
+            return (y, float(self.descending(u, deriv=1))) if derivative else y
+        return inner_loop_displacement(
+            u, origin, end, self.ascending, self.descending, self.u_range, derivative=derivative
+        )
+
+    def _advance(self, state, u):
+        U0, Un = self.u_range
+        tol = 1e-9 * (Un - U0)
+        if abs(u - state.u) <= tol:  # below the model's resolution: no move, no reversal
+            return state
+        rising = u > state.u
+        stack = list(state.reversals)
+        if rising != state.rising and U0 + tol < state.u < Un - tol:
+            stack.append((state.u, state.y))  # a reversal inside the range is remembered
+        # wiping-out: passing the closure point forgets the inner loop
+        while len(stack) >= 2 and ((rising and u >= stack[-2][0]) or (not rising and u <= stack[-2][0])):
+            del stack[-2:]
+        if u <= U0 + tol or u >= Un - tol:  # at the ends of the range all memory is wiped out
+            stack = []
+            y = self._major(u, rising)
+        else:
+            origin, end = self._curve(stack, rising)
+            y = self._eval(origin, end, u)
+        return HysteresisState(u=u, y=float(y), rising=rising, reversals=stack)
+
+    def inverse(self, target: float) -> float:
+        """Voltage that brings the displacement to ``target`` from the current state (not committed).
+
+        The monotonic voltage path from the current state is followed curve by curve (closing inner
+        loops on the way) and the curve that contains the target is solved by Newton-Raphson.
+
+        Raises
+        ------
+        ValueError
+            If the target is NaN or outside :attr:`displacement_range`.
+        """
+        y_t = self._check_target(target)
+        st = self.state
+        if y_t == st.y:
+            return st.u
+        rising = y_t > st.y
+        U0, Un = self.u_range
+        stack = list(st.reversals)
+        if rising != st.rising and U0 + 1e-9 * (Un - U0) < st.u < Un - 1e-9 * (Un - U0):
+            stack.append((st.u, st.y))
+        u_from = st.u
+        xtol = 1e-10 * (Un - U0)
+        while True:
+            # close inner loops whose closure point lies before the target
+            if len(stack) >= 2:
+                end = stack[-2]
+                if (rising and y_t >= end[1]) or (not rising and y_t <= end[1]):
+                    u_from = end[0]
+                    del stack[-2:]
+                    continue
+            origin, end = self._curve(stack, rising)
+            break
+        f = lambda x: self._eval(origin, end, x, derivative=True)  # noqa: E731
+        if rising:
+            return _newton_bisect(f, u_from, end[0], y_t, xtol=xtol)
+        return _newton_bisect(f, end[0], u_from, y_t, xtol=xtol)
+
+
+class PIHysteresis(HysteresisModel):
+    """Prandtl-Ishlinskii model with an analytic inverse.
+
+    .. math:: y = \\sum_{i=0}^{n-1} w_i\\, F_{r_i}[v] + c, \\qquad v = \\varphi(s),\\; s = (u-U_0)/(U_n-U_0)
+
+    with play operators :math:`F_{r_i}` (:func:`play_operator`), thresholds
+    :math:`r_i = i/(2n)` (the range of ``v`` is [0, 1]), non-negative weights (``w_0 > 0``), and an
+    optional monotonic input shaping :math:`\\varphi(s) = s + a\\,s(1-s)` (``|a| < 1``) that lets the
+    otherwise point-symmetric PI loop lean like a real piezo loop; :math:`\\varphi` has a closed-form
+    inverse, so the whole inverse stays analytic.
+
+    The inverse PI operator (Krejci & Kuhnen 2001) has thresholds
+    :math:`r'_i = \\sum_{j\\le i} w_j (r_i - r_j)`, weights :math:`w'_0 = 1/w_0`,
+    :math:`w'_i = -w_i / (W_i W_{i-1})` with :math:`W_i = \\sum_{j \\le i} w_j`, and states
+    :math:`z'_i = W_i z_i + \\sum_{j>i} w_j z_j` computed from the forward states, so feed-forward
+    is exact for the model whatever the memory.
+
+    References
+    ----------
+    Krejci, P. & Kuhnen, K. (2001). Inverse control of systems with hysteresis and creep.
+    IEE Proc. Control Theory Appl. 148, 185-192.
+    Rakotondrabe, M. (2012). Classical Prandtl-Ishlinskii modeling and inverse multiplicative structure
+    to compensate hysteresis in piezoactuators. ACC 2012.
+    """
+
+    kind = "pi"
+
+    def __init__(self, weights, offset, u_range, *, shape: float = 0.0, **kw):
+        w = np.asarray(weights, dtype=float)
+        if w.ndim != 1 or w.size < 1 or not np.all(np.isfinite(w)):
+            raise ValueError("PI weights must be a non-empty finite 1-D array")
+        if w[0] <= 0 or np.any(w < 0):
+            raise ValueError("PI weights must be non-negative with w[0] > 0 (otherwise no inverse exists)")
+        if not -1.0 < shape < 1.0:
+            raise ValueError(f"input shaping a={shape} must satisfy |a| < 1 to stay monotonic")
+        self.weights = w
+        self.thresholds = np.arange(w.size) / (2.0 * w.size)
+        self.offset = float(offset)
+        self.shape = float(shape)
+        W = np.cumsum(w)
+        self.inv_thresholds = np.array([np.sum(w[: i + 1] * (self.thresholds[i] - self.thresholds[: i + 1]))
+                                        for i in range(w.size)])
+        self.inv_weights = np.concatenate([[1.0 / w[0]], -w[1:] / (W[1:] * W[:-1])])
+        self._W = W
+        super().__init__(u_range, **kw)
+
+    # input shaping -------------------------------------------------------------------------------
+    def _v(self, u):
+        s = (np.asarray(u, dtype=float) - self.u_range[0]) / (self.u_range[1] - self.u_range[0])
+        return s + self.shape * s * (1.0 - s)
+
+    def _u(self, v):
+        a = self.shape
+        v = min(max(float(v), 0.0), 1.0)
+        # the root in [0, 1] of a s^2 - (1 + a) s + v = 0, in the form without cancellation
+        s = 2.0 * v / ((1.0 + a) + math.sqrt(max((1.0 + a) ** 2 - 4.0 * a * v, 0.0)))
+        s = min(max(s, 0.0), 1.0)
+        return self.u_range[0] + s * (self.u_range[1] - self.u_range[0])
+
+    # states ------------------------------------------------------------------------------------
+    def _output(self, z):
+        return float(self.weights @ z + self.offset)
+
+    def _major_state(self, u, rising):
+        v = float(self._v(u))
+        r = self.thresholds
+        # after a descent to U0 every play sits at r; rising to v lifts it to max(v - r, r); after a
+        # rise to Un every play sits at 1 - r; falling to v lowers it to min(v + r, 1 - r)
+        z = np.maximum(v - r, r) if rising else np.minimum(v + r, 1.0 - r)
+        return HysteresisState(u=u, y=self._output(z), rising=rising, plays=z)
+
+    def _major(self, u, rising):
+        return self._major_state(u, rising).y
+
+    def _advance(self, state, u):
+        v = float(self._v(u))
+        r = self.thresholds
+        z = np.maximum(v - r, np.minimum(v + r, state.plays))
+        rising = state.rising if u == state.u else u > state.u
+        return HysteresisState(u=u, y=self._output(z), rising=rising, plays=z)
+
+    def design_matrix(self, voltages, *, start_rising: bool = False) -> np.ndarray:
+        """Play outputs ``(N, n)`` for a voltage path starting at U0 (after a descent by default)."""
+        v = self._v(np.asarray(voltages, dtype=float))
+        r = self.thresholds
+        z = self._major_state(self.u_range[0], start_rising).plays.copy()
+        out = np.empty((v.size, r.size))
+        for k, vk in enumerate(v):
+            z = np.maximum(vk - r, np.minimum(vk + r, z))
+            out[k] = z
+        return out
+
+    def inverse(self, target: float) -> float:
+        """Analytic inverse: one step of the inverse PI operator from the states matching the
+        current forward states, then the inverse input shaping (not committed).
+
+        Raises
+        ------
+        ValueError
+            If the target is NaN or outside :attr:`displacement_range`.
+        """
+        y_t = self._check_target(target) - self.offset
+        z, w, W = self.state.plays, self.weights, self._W
+        tail = np.concatenate([np.cumsum((w * z)[::-1])[::-1][1:], [0.0]])  # sum_{j>i} w_j z_j
+        zi = W * z + tail
+        ri = self.inv_thresholds
+        zi = np.maximum(y_t - ri, np.minimum(y_t + ri, zi))
+        v = float(self.inv_weights @ zi)
+        return self._u(v)
+
+
+# ---------------------------------------------------------------------------------------------
+# fitting
+# ---------------------------------------------------------------------------------------------
+
+
+def _validated_characterisation(char) -> pd.DataFrame:
+    if not isinstance(char, pd.DataFrame):
+        raise TypeError(f"characterisation must be a pandas DataFrame, got {type(char).__name__}")
+    missing = {"u", "displacement", "branch"} - set(char.columns)
+    if missing:
+        raise ValueError(f"characterisation lacks column(s) {sorted(missing)}")
+    if len(char) == 0:
+        raise ValueError("characterisation is empty: no voltages were recorded")
+    bad = set(char["branch"].unique()) - set(BRANCHES)
+    if bad:
+        raise ValueError(f"unknown branch label(s) {sorted(bad)}; expected {BRANCHES}")
+    u = char["u"].to_numpy(float)
+    if not np.all(np.isfinite(u)):
+        raise ValueError("characterisation has non-finite voltages")
+    return char
+
+
+def _branch_runs(char: pd.DataFrame, label: str):
+    """Contiguous runs of one major-branch label (each run must be monotonic in u)."""
+    lab = char["branch"].to_numpy()
+    idx = np.flatnonzero(lab == label)
+    if idx.size == 0:
+        return []
+    cuts = np.flatnonzero(np.diff(idx) > 1) + 1
+    return np.split(idx, cuts)
+
+
+def _check_monotonic(char, label, rising):
+    u = char["u"].to_numpy(float)
+    for run in _branch_runs(char, label):
+        du = np.diff(u[run])
+        if du.size and (np.any(du < 0) if rising else np.any(du > 0)):
+            k = run[1:][(du < 0) if rising else (du > 0)][0]
+            raise ValueError(
+                f"non-monotonic characterisation: the voltage on the '{label}' branch "
+                f"{'falls' if rising else 'rises'} at row {k}; each branch must be swept one way"
+            )
+
+
+def _major_points(char, label):
+    ok = char["ok"].to_numpy(bool) if "ok" in char else np.ones(len(char), bool)
+    disp = char["displacement"].to_numpy(float)
+    sel = (char["branch"].to_numpy() == label) & ok & np.isfinite(disp)
+    return char["u"].to_numpy(float)[sel], disp[sel]
+
+
+def fit_hysteresis(characterisation: pd.DataFrame, kind: str = "polynomial", *, order: int = 4,
+                   n_operators: int = 10, shape: float | None = None) -> HysteresisModel:
+    """Fit a hysteresis model to a characterisation (paper, Fig. 8b).
+
+    Parameters
+    ----------
+    characterisation : DataFrame
+        From :func:`characterise_hysteresis` (columns ``u, displacement, branch`` and optionally ``ok``;
+        ``attrs`` ``axis``, ``direction``, ``u_min``, ``u_max``). Rows with ``ok=False`` are excluded.
+    kind : {"polynomial", "pi"}
+        ``"polynomial"``: the paper's 4th-order :math:`P_n, D_n` fitted to the major branches (with the
+        two branches forced to meet at U0 and Un so the loop is closed) and eq. 11 for inner curves.
+        ``"pi"``: Prandtl-Ishlinskii, fitted to every valid row (inner loops included).
+    order : int
+        Polynomial order (the paper: 4).
+    n_operators : int
+        Number of play operators of the PI model.
+    shape : float, optional
+        PI input shaping coefficient; default: chosen by least squares over ``(-0.9, 0.9)``.
+
+    Returns
+    -------
+    HysteresisModel
+        With its memory replayed over the characterisation, i.e. matching the axis' state at the end of
+        the characterisation.
+
+    Raises
+    ------
+    TypeError, ValueError
+        Not a DataFrame; empty; unknown branch labels; a branch swept both ways (non-monotonic);
+        too few valid points for the fit; a probe that did not move or moved against the voltage.
+    """
+    char = _validated_characterisation(characterisation)
+    if kind not in ("polynomial", "pi"):
+        raise ValueError(f"kind must be 'polynomial' or 'pi', got {kind!r}")
+    _check_monotonic(char, "ascending", True)
+    _check_monotonic(char, "descending", False)
+    attrs = dict(char.attrs)
+    u_all = char["u"].to_numpy(float)
+    u0 = float(attrs.get("u_min", u_all.min()))
+    un = float(attrs.get("u_max", u_all.max()))
+    if not un > u0:
+        raise ValueError("characterisation spans no voltage range")
+    order = int(order)
+    ua, ya = _major_points(char, "ascending")
+    ud, yd = _major_points(char, "descending")
+    need = order + 1
+    for name, uu in (("ascending", ua), ("descending", ud)):
+        n_distinct = np.unique(uu).size
+        if n_distinct < need:
+            raise ValueError(
+                f"too few points for a {order}th-order fit: the {name} branch has {n_distinct} valid "
+                f"distinct voltage(s), at least {need} are needed"
+            )
+    y_all = np.concatenate([ya, yd])
+    u_cat = np.concatenate([ua, ud])
+    spread = np.ptp(y_all)
+    noise = np.median(np.abs(np.diff(ya))) if ya.size > 2 else 0.0
+    corr = np.corrcoef(u_cat, y_all)[0, 1] if spread > 0 else 0.0
+    if not corr >= 0.5:
+        raise ValueError(
+            "non-monotonic characterisation: the displacement does not follow the voltage "
+            f"(range {spread:.3g} px, correlation {corr:.2f}); "
+            "was the probe tracked, and did it move?"
+        )
+    kw = dict(axis=attrs.get("axis", "unknown"), direction=attrs.get("direction", (1.0, 0.0)),
+              meta={"n_points": int(y_all.size), "characterisation_noise_px": float(noise)})
+    if kind == "polynomial":
+        model = _fit_polynomial(ua, ya, ud, yd, (u0, un), order, kw)
+    else:
+        model = _fit_pi(char, (u0, un), n_operators, shape, kw)
+    # replay the characterisation so that the memory matches the axis now
+    model.reset()
+    model.forward(np.clip(u_all, u0, un))
+    fitted = model.predict(u_all, reset=True)
+    ok = char["ok"].to_numpy(bool) if "ok" in char else np.ones(len(char), bool)
+    res = char["displacement"].to_numpy(float) - fitted
+    good = ok & np.isfinite(res)
+    lab = char["branch"].to_numpy()
+    model.meta["rms_residual_px"] = float(np.sqrt(np.mean(res[good] ** 2)))
+    inner = good & np.char.startswith(lab.astype(str), "inner")
+    model.meta["rms_residual_inner_px"] = float(np.sqrt(np.mean(res[inner] ** 2))) if inner.any() else float("nan")
+    return model
+
+
+def _fit_polynomial(ua, ya, ud, yd, u_range, order, kw):
+    U0, Un = u_range
+    sa, sd = (ua - U0) / (Un - U0), (ud - U0) / (Un - U0)
+    n = order + 1
+    Va = np.vander(sa, n, increasing=True)
+    Vd = np.vander(sd, n, increasing=True)
+    A = np.zeros((Va.shape[0] + Vd.shape[0], 2 * n))
+    A[: Va.shape[0], :n] = Va
+    A[Va.shape[0]:, n:] = Vd
+    b = np.concatenate([ya, yd])
+    # the loop is closed: Pn(U0) = Dn(U0), Pn(Un) = Dn(Un)  (null-space method)
+    C = np.zeros((2, 2 * n))
+    C[0, 0], C[0, n] = 1.0, -1.0
+    C[1, :n], C[1, n:] = 1.0, -1.0
+    _, _, vt = np.linalg.svd(C)
+    N = vt[2:].T
+    z, *_ = np.linalg.lstsq(A @ N, b, rcond=None)
+    coef = N @ z
+    model = PolynomialHysteresis(coef[:n], coef[n:], u_range, **kw)
+    grid = np.linspace(U0, Un, 401)
+    slope = model.gain
+    for name, fn in (("ascending", model.ascending), ("descending", model.descending)):
+        d = fn(grid, deriv=1)
+        if d.min() < -0.05 * abs(slope):
+            raise ValueError(
+                f"non-monotonic characterisation: the fitted {name} branch falls near "
+                f"u={grid[np.argmin(d)]:.4g} V (slope {d.min():.3g} px/V); check the tracking"
+            )
+    return model
+
+
+def _fit_pi(char, u_range, n_operators, shape, kw):
+    n_operators = int(n_operators)
+    if n_operators < 1:
+        raise ValueError("n_operators must be >= 1")
+    u = np.clip(char["u"].to_numpy(float), *u_range)
+    y = char["displacement"].to_numpy(float)
+    ok = (char["ok"].to_numpy(bool) if "ok" in char else np.ones(len(char), bool)) & np.isfinite(y)
+    if ok.sum() < n_operators + 2:
+        raise ValueError(f"too few valid points ({int(ok.sum())}) for a PI model with {n_operators} operators")
+    from scipy.optimize import lsq_linear, minimize_scalar
+
+    def solve(a):
+        proto = PIHysteresis(np.ones(n_operators), 0.0, u_range, shape=a, **kw)
+        Z = proto.design_matrix(u)[ok]
+        A = np.column_stack([Z, np.ones(Z.shape[0])])
+        scale = max(np.ptp(y[ok]), 1e-12)
+        lb = np.r_[1e-6 * scale, np.zeros(n_operators - 1), -np.inf]
+        res = lsq_linear(A, y[ok], bounds=(lb, np.full(n_operators + 1, np.inf)))
+        return res.cost, res.x
+
+    if shape is None:
+        best = minimize_scalar(lambda a: solve(a)[0], bounds=(-0.9, 0.9), method="bounded",
+                               options={"xatol": 1e-3})
+        shape = float(best.x) if solve(best.x)[0] <= solve(0.0)[0] else 0.0
+    _, x = solve(float(shape))
+    return PIHysteresis(x[:n_operators], x[n_operators], u_range, shape=float(shape), **kw)
+
+
+# ---------------------------------------------------------------------------------------------
+# characterisation on a microscope / axis pair
+# ---------------------------------------------------------------------------------------------
+
+
+def characterise_hysteresis(microscope, axis, roi, *, u_min=None, u_max=None, n_steps: int = 30,
+                            inner_loops=True, settle_frames: int = 1, u_start=None,
+                            precondition: bool = True, tracker=None, axis_name=None,
+                            progress: bool = False) -> pd.DataFrame:
+    """Characterise the hysteresis of one actuator axis with the visual tracker (paper, Fig. 8b).
+
+    Voltages are applied incrementally from U0 to Un and back (then along inner loops), one increment
+    per frame; each command acts from the next frame, so after ``settle_frames`` grabbed frames the probe
+    position measured by the tracker is recorded. The image direction of the axis is measured by a
+    principal-component fit of the tracked positions, and the displacement is projected on it.
+
+    Parameters
+    ----------
+    microscope : Microscope
+        Source of frames (``frame_period``, ``grab()``).
+    axis : Axis
+        Actuator channel (``limits``, ``apply(volts)``).
+    roi : (x, y, w, h)
+        Probe's ROI in the current frame.
+    u_min, u_max : float, optional
+        U0 and Un (default: the axis limits). A sub-range keeps the probe in view.
+    n_steps : int
+        Increments per major branch.
+    inner_loops : bool or sequence of float
+        See :func:`characterisation_voltages`.
+    settle_frames : int
+        Frames grabbed per increment (>= 1); the last one is measured.
+    u_start : float, optional
+        The command the axis holds now (default: ``axis.command`` if the axis reports it, else U0).
+        The axis is ramped from there to U0 in increments so the tracker follows the probe.
+    precondition : bool
+        Run one unrecorded major loop first, so the recorded path starts on a known state (U0 after a
+        descent) -- the state :func:`fit_hysteresis` assumes.
+    tracker : object, optional
+        Anything with ``init(frame, roi)`` and ``update(frame) -> (x, y, score, ok)``; default
+        ``semlab.tracking.Tracker()``.
+    axis_name : str, optional
+        Identity stored with the data (default :func:`axis_identity`).
+    progress : bool
+        Show a tqdm progress bar.
+
+    Returns
+    -------
+    DataFrame
+        One row per increment: ``step, segment, u, branch, frame, t, x, y, score, ok, displacement``
+        (px along the measured direction, 0 at the first valid U0 point, rising with the voltage).
+        ``attrs``: ``axis, direction, origin, u_min, u_max, frame_period, settle_frames,
+        preconditioned, off_axis_rms_px, n_lost``.
+    """
+    from semlab.control import _default_tracker, drive_voltages
+
+    lo, hi = (float(v) for v in axis.limits)
+    u_min = lo if u_min is None else _finite(u_min, "u_min")
+    u_max = hi if u_max is None else _finite(u_max, "u_max")
+    if not lo <= u_min < u_max <= hi:
+        raise ValueError(f"need axis limit {lo} <= u_min={u_min} < u_max={u_max} <= axis limit {hi}")
+    if int(settle_frames) < 1:
+        raise ValueError("settle_frames must be >= 1 (commands act from the next frame)")
+    plan = characterisation_voltages(u_min, u_max, n_steps, inner_loops)
+    step_v = (u_max - u_min) / int(n_steps)
+    if u_start is None:
+        u_start = getattr(axis, "command", None)
+    u_start = u_min if u_start is None else _finite(u_start, "u_start")
+    pre = list(np.linspace(u_start, u_min, max(1, int(math.ceil(abs(u_start - u_min) / step_v))) + 1)[1:])
+    if precondition:
+        up = np.linspace(u_min, u_max, int(n_steps) + 1)[1:]
+        pre += list(up) + list(up[::-1][1:]) + [u_min]
+    tracker = _default_tracker(tracker)
+    frame0 = microscope.grab()
+    tracker.init(frame0, roi)
+    n_pre = len(pre)
+    volts = np.concatenate([pre, plan["u"].to_numpy()])
+    run = drive_voltages(microscope, axis, tracker, volts, settle_frames=settle_frames, progress=progress,
+                         desc="characterising hysteresis")
+    rec = run.iloc[n_pre:].reset_index(drop=True)
+    df = plan.copy()
+    for c in ("frame", "t", "x", "y", "score", "ok"):
+        df[c] = rec[c].to_numpy()
+    ok = df["ok"].to_numpy(bool) & np.isfinite(df["x"].to_numpy(float)) & np.isfinite(df["y"].to_numpy(float))
+    df["ok"] = ok
+    pts = df.loc[ok, ["x", "y"]].to_numpy(float)
+    if pts.shape[0] < 3:
+        raise ValueError(f"the tracker followed the probe in only {pts.shape[0]} frame(s); nothing to fit")
+    centre = pts.mean(axis=0)
+    _, sv, vt = np.linalg.svd(pts - centre, full_matrices=False)
+    direction = vt[0]
+    proj = (pts - centre) @ direction
+    if np.corrcoef(df.loc[ok, "u"].to_numpy(float), proj)[0, 1] < 0:
+        direction = -direction
+    origin = pts[0]
+    disp = np.full(len(df), np.nan)
+    disp[ok] = (pts - origin) @ direction
+    df["displacement"] = disp
+    off_axis = (pts - centre) @ np.array([-direction[1], direction[0]])
+    df.attrs.update(
+        axis=axis_name if axis_name is not None else axis_identity(axis),
+        direction=(float(direction[0]), float(direction[1])),
+        origin=(float(origin[0]), float(origin[1])),
+        u_min=u_min, u_max=u_max, frame_period=float(microscope.frame_period),
+        settle_frames=int(settle_frames), preconditioned=bool(precondition),
+        off_axis_rms_px=float(np.sqrt(np.mean(off_axis ** 2))), n_lost=int((~ok).sum()),
+    )
+    return df
