@@ -1,0 +1,593 @@
+"""Image-based visual servo of a piezo axis with hysteresis feed-forward (paper, Fig. 8a, Fig. 9).
+
+The loop runs at the frame rate. After frame ``k`` is grabbed the tracker measures the probe; the
+controller computes a command that is applied at once and acts from frame ``k + 1`` -- one frame of
+latency, which is what a real SEM imposes (the frame that shows the effect of a command can only be
+scanned after the command was sent).
+
+Command law (all quantities in px along the axis' image direction, the measured displacement ``y``):
+
+* with feed-forward, the hysteresis model's inverse moves the probe to the target in one step and
+  the PID only adds a small correction ``c``: ``u = model.inverse(y_goal + c)`` -- the model's memory
+  keeps track of every reversal the corrections cause, so the loop sees an almost linear plant;
+* without feed-forward the model only supplies the direction and the mean gain ``G`` (px/V):
+  ``u = u_start + c / G``.
+
+``c`` comes from :class:`PID` (derivative on a low-pass filtered measurement, anti-windup by
+back-calculation, output and slew limits). Safety rules: a frame where the tracker reports ``ok=False``
+holds the last safe command and is flagged; commands are clipped into the axis limits (and the model's
+range) before :meth:`Axis.apply`; NaN targets or measurements raise ValueError.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from semlab.protocols import check_command
+
+__all__ = [
+    "PID",
+    "VisualServo",
+    "drive_voltages",
+    "move_to",
+    "step_metrics",
+    "step_response",
+]
+
+RESPONSE_COLUMNS = ("frame", "t", "u", "x", "y", "displacement", "target", "ok")
+
+
+def _default_tracker(tracker):
+    if tracker is None:
+        from semlab.tracking import Tracker
+
+        return Tracker()
+    if not (callable(getattr(tracker, "init", None)) and callable(getattr(tracker, "update", None))):
+        raise TypeError(f"tracker must have init(frame, roi) and update(frame); got {type(tracker).__name__}")
+    return tracker
+
+
+def _read_result(res):
+    """(x, y, score, ok) from a tracker result (attributes or a 4-tuple)."""
+    if all(hasattr(res, a) for a in ("x", "y", "ok")):
+        x, y, ok = res.x, res.y, res.ok
+        score = getattr(res, "score", float("nan"))
+    else:
+        x, y, score, ok = res
+    return float(x), float(y), float(score) if score is not None else float("nan"), bool(ok)
+
+
+def _roi_centre(roi):
+    try:
+        x, y, w, h = (float(v) for v in roi)
+    except (TypeError, ValueError):
+        raise ValueError(f"roi must be (x, y, w, h), got {roi!r}") from None
+    if not (w > 0 and h > 0) or not all(map(math.isfinite, (x, y, w, h))):
+        raise ValueError(f"roi {roi!r} must have finite coordinates and positive size")
+    return x + (w - 1) / 2.0, y + (h - 1) / 2.0
+
+
+def _progress(iterable, enabled, desc, total=None):
+    if not enabled:
+        return iterable
+    from tqdm.auto import tqdm
+
+    return tqdm(iterable, desc=desc, total=total, leave=False)
+
+
+def drive_voltages(microscope, axis, tracker, voltages, *, settle_frames: int = 1, model=None,
+                   progress: bool = False, desc: str = "driving") -> pd.DataFrame:
+    """Apply a voltage path one increment per frame while an initialised tracker follows the probe.
+
+    Parameters
+    ----------
+    microscope, axis
+        :class:`~semlab.protocols.Microscope` and :class:`~semlab.protocols.Axis`.
+    tracker
+        Already initialised (``init`` called on the current frame).
+    voltages : (N,) array_like
+        Commands in volts; each must lie within ``axis.limits``.
+    settle_frames : int
+        Frames grabbed per command; the last one's measurement is recorded.
+    model : HysteresisModel, optional
+        Shadow model that is told every command (keeps its reversal memory in step with the axis).
+
+    Returns
+    -------
+    DataFrame
+        ``frame, t, u, x, y, score, ok``, one row per command (``frame`` counts grabs since the call).
+    """
+    volts = np.asarray(voltages, dtype=float).ravel()
+    lim = tuple(float(v) for v in axis.limits)
+    for v in volts:
+        check_command(v, lim, "drive_voltages")
+    dt = float(microscope.frame_period)
+    rows, n = [], 0
+    for u in _progress(volts, progress, desc):
+        axis.apply(float(u))
+        if model is not None:
+            model.forward(min(max(float(u), model.u_range[0]), model.u_range[1]))
+        for _ in range(int(settle_frames)):
+            frame = microscope.grab()
+            n += 1
+            x, y, score, ok = _read_result(tracker.update(frame))
+        ok = ok and math.isfinite(x) and math.isfinite(y)
+        rows.append((n, n * dt, float(u), x, y, score, ok))
+    return pd.DataFrame(rows, columns=["frame", "t", "u", "x", "y", "score", "ok"])
+
+
+@dataclass
+class PID:
+    """Discrete PID at the frame rate (gains per frame, output in px of displacement).
+
+    .. math::
+        c_k = k_p e_k + I_k - k_d(\\tilde m_k - \\tilde m_{k-1}),\\quad I_k = I_{k-1} + k_i e_k,\\quad
+        \\tilde m_k = \\alpha\\tilde m_{k-1} + (1-\\alpha) m_k
+
+    with ``e = setpoint - m``. The derivative acts on the filtered measurement (no kick when the
+    setpoint jumps, less noise). The output is clipped to ``output_limits`` and may change by at most
+    ``slew_limit`` per update; whenever the output is limited (here or later, see :meth:`track`), the
+    integrator is back-calculated so that it does not wind up.
+
+    Parameters
+    ----------
+    kp, ki, kd : float
+        Proportional, integral (per frame) and derivative (x frame) gains.
+    derivative_smoothing : float
+        ``alpha`` in [0, 1) of the first-order low-pass on the measurement for the derivative.
+    output_limits : (float, float)
+    slew_limit : float
+        Largest change of the output per update (``inf``: none).
+    """
+
+    kp: float = 0.0
+    ki: float = 0.6
+    kd: float = 0.0
+    derivative_smoothing: float = 0.5
+    output_limits: tuple = (-math.inf, math.inf)
+    slew_limit: float = math.inf
+
+    def __post_init__(self):
+        for name in ("kp", "ki", "kd"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"PID gain {name}={v} must be finite and >= 0")
+        if not 0.0 <= self.derivative_smoothing < 1.0:
+            raise ValueError("derivative_smoothing must be in [0, 1)")
+        if not self.slew_limit > 0:
+            raise ValueError("slew_limit must be > 0")
+        self.reset()
+
+    def reset(self, output: float = 0.0) -> None:
+        """Start again with the output at ``output`` (bumpless: the integrator takes it)."""
+        self.integral = float(output)
+        self.output = float(output)
+        self._m_filt = None
+        self._p = self._d = 0.0
+
+    def set_limits(self, lo: float, hi: float) -> None:
+        if not lo <= hi:
+            raise ValueError(f"output limits ({lo}, {hi}) are empty")
+        self.output_limits = (float(lo), float(hi))
+
+    def update(self, setpoint: float, measurement: float) -> float:
+        """One control step; returns the new output.
+
+        Raises
+        ------
+        ValueError
+            If the setpoint or the measurement is not finite.
+        """
+        if not math.isfinite(float(setpoint)):
+            raise ValueError(f"PID setpoint {setpoint} is not finite")
+        if not math.isfinite(float(measurement)):
+            raise ValueError(f"PID measurement {measurement} is not finite; refusing to drive blind")
+        e = float(setpoint) - float(measurement)
+        a = self.derivative_smoothing
+        m_prev = self._m_filt
+        self._m_filt = float(measurement) if m_prev is None else a * m_prev + (1 - a) * float(measurement)
+        self._d = 0.0 if m_prev is None else -self.kd * (self._m_filt - m_prev)
+        self._p = self.kp * e
+        lo, hi = self.output_limits
+        integral = self.integral + self.ki * e
+        # anti-windup (1): the integral never drives the output past its limits (back-calculation)
+        integral = min(max(integral, lo - self._p - self._d), hi - self._p - self._d)
+        raw = self._p + integral + self._d
+        out = min(max(raw, lo), hi)
+        slewed = min(max(out, self.output - self.slew_limit), self.output + self.slew_limit)
+        # anti-windup (2): while the slew limit holds the output back, do not integrate further
+        if slewed != out and (slewed - out) * e < 0:
+            integral = self.integral
+        self.integral = integral
+        self.output = slewed
+        return slewed
+
+    def track(self, applied: float) -> None:
+        """Tell the controller the output actually used after limits further downstream (axis limits,
+        voltage slew): the integral is back-calculated so that it does not wind up against them."""
+        applied = float(applied)
+        if applied < self.output:
+            self.integral = min(self.integral, applied - self._p - self._d)
+        elif applied > self.output:
+            self.integral = max(self.integral, applied - self._p - self._d)
+        self.output = applied
+
+
+class VisualServo:
+    """Closed visual-servo loop on one axis (paper, Fig. 8a), used by :func:`step_response` and
+    :func:`move_to`.
+
+    Parameters
+    ----------
+    microscope, axis
+        Protocol objects.
+    model : HysteresisModel
+        Fitted on this axis; it is the shadow of the axis (its state must be the axis' current command
+        and history, as after :func:`~semlab.hysteresis.fit_hysteresis` or a previous servo run).
+    tracker : object, optional
+        ``init/update`` tracker; default ``semlab.tracking.Tracker()``.
+    feedforward : bool
+        Use the model's inverse (True) or only its direction and mean gain (False).
+    pid : PID, optional
+        Default: ``PID()`` (with feed-forward) or ``PID(ki=0.45)`` (without).
+    max_slew_v : float, optional
+        Largest change of the command per frame (V).
+    max_step_px : float, optional
+        Largest feed-forward move per frame (px); keeps the probe within the tracker's search window.
+    """
+
+    def __init__(self, microscope, axis, model, *, tracker=None, feedforward: bool = True, pid=None,
+                 max_slew_v: float | None = None, max_step_px: float | None = None):
+        if model is None:
+            raise ValueError("a hysteresis model is required (it supplies at least direction and gain)")
+        model.check_axis(axis)
+        self.microscope, self.axis, self.model = microscope, axis, model
+        self.tracker = _default_tracker(tracker)
+        self.feedforward = bool(feedforward)
+        self.pid = pid if pid is not None else (PID() if feedforward else PID(ki=0.45))
+        self.max_slew_v = math.inf if max_slew_v is None else float(max_slew_v)
+        self.max_step_px = math.inf if max_step_px is None else float(max_step_px)
+        if not (self.max_slew_v > 0 and self.max_step_px > 0):
+            raise ValueError("max_slew_v and max_step_px must be > 0")
+        a_lo, a_hi = (float(v) for v in axis.limits)
+        m_lo, m_hi = model.u_range
+        self.u_lo, self.u_hi = max(a_lo, m_lo), min(a_hi, m_hi)
+        if not self.u_lo < self.u_hi:
+            raise ValueError("the model's voltage range does not overlap the axis limits")
+        self.direction = np.asarray(model.direction, dtype=float)
+        self.dt = float(microscope.frame_period)
+        self.rows: list[dict] = []
+        self.frame = -1
+        self.u = float(model.state.u)
+        self.last_safe_u = self.u
+        self.y_meas = 0.0
+        self._u_effect = self.u  # the command in effect during the frame being acquired
+
+    # -- measurement --------------------------------------------------------------------------------
+    def start(self, roi) -> VisualServo:
+        """Grab the current frame, initialise the tracker on ``roi``; displacements are measured from
+        the ROI centre along the axis direction."""
+        self.p0 = np.array(_roi_centre(roi))
+        frame = self.microscope.grab()
+        self.frame = 0
+        self.tracker.init(frame, tuple(roi))
+        self.y_meas = 0.0
+        self._record(self.p0[0], self.p0[1], True, target=0.0, stage="start", held=False)
+        return self
+
+    def _record(self, x, y, ok, *, target, stage, held):
+        disp = float((np.array([x, y]) - self.p0) @ self.direction) if ok else float("nan")
+        self.rows.append(dict(frame=self.frame, t=self.frame * self.dt, u=self._u_effect, x=x, y=y,
+                              displacement=disp, target=float(target), ok=bool(ok), held=bool(held),
+                              stage=stage))
+
+    def _grab_measure(self):
+        """Grab the next frame (the last command is in effect) and measure; returns (x, y, ok)."""
+        self._u_effect = self.u
+        frame = self.microscope.grab()
+        self.frame += 1
+        x, y, _, ok = _read_result(self.tracker.update(frame))
+        if ok and not (math.isfinite(x) and math.isfinite(y)):
+            raise ValueError(f"tracker reported ok=True with a non-finite position ({x}, {y}) at frame "
+                             f"{self.frame}; refusing to drive blind")
+        if ok:
+            self.y_meas = float((np.array([x, y]) - self.p0) @ self.direction)
+        return x, y, ok
+
+    # -- actuation ------------------------------------------------------------------------------------
+    def _apply(self, u: float) -> float:
+        """Clip into limits and slew, apply, tell the shadow model; returns the command used."""
+        u = min(max(u, self.u - self.max_slew_v), self.u + self.max_slew_v)
+        u = min(max(u, self.u_lo), self.u_hi)
+        u = check_command(u, tuple(float(v) for v in self.axis.limits), "servo")
+        self.axis.apply(u)
+        self.model.forward(u)
+        self.u = u
+        self.last_safe_u = u
+        return u
+
+    def _command_for(self, c: float, goal_model: float, u_ref: float) -> float:
+        if self.feedforward:
+            lo, hi = self.model.displacement_range
+            return self.model.inverse(min(max(goal_model + c, lo), hi))
+        return u_ref + c / self.model.gain
+
+    def _achieved(self, u: float, goal_model: float, u_ref: float) -> float:
+        """PID output that corresponds to the command actually applied (for anti-windup)."""
+        if self.feedforward:
+            return self.model.state.y - goal_model
+        return (u - u_ref) * self.model.gain
+
+    def reachable(self) -> tuple[float, float]:
+        """Displacements (px, measurement frame) the piezo can reach from here, per the model."""
+        lo, hi = self.model.displacement_range
+        y_model = self.model.state.y
+        return self.y_meas + (lo - y_model), self.y_meas + (hi - y_model)
+
+    def goto(self, target: float, n_frames: int, *, stage: str = "nano") -> None:
+        """Servo to ``target`` px (measured from the start reference) for ``n_frames`` frames.
+
+        Raises
+        ------
+        ValueError
+            NaN target, or a target the piezo cannot reach according to the model.
+        """
+        target = float(target)
+        if not math.isfinite(target):
+            raise ValueError(f"target {target} px is not finite")
+        r_lo, r_hi = self.reachable()
+        if not r_lo <= target <= r_hi:
+            raise ValueError(
+                f"target {target:.4g} px is outside the model's range from here [{r_lo:.4g}, {r_hi:.4g}] px;"
+                " use move_to(..., macro=...) for a macro/nano hand-over"
+            )
+        # feed-forward goal in model coordinates: the measured remaining distance from the model state
+        goal_model = self.model.state.y + (target - self.y_meas)
+        u_ref = self.u
+        pid = self.pid
+        pid.reset(0.0)
+        if self.feedforward:
+            lo, hi = self.model.displacement_range
+            pid.set_limits(lo - goal_model, hi - goal_model)
+        else:
+            g = self.model.gain
+            pid.set_limits((self.u_lo - u_ref) * g, (self.u_hi - u_ref) * g)
+        # the first command is sent right after the latest frame (no frame is wasted); from then on
+        # one command per frame, each acting from the next frame
+        state = {"ff_pos": self.model.state.y}
+
+        def act():
+            if self.feedforward and state["ff_pos"] != goal_model:
+                state["ff_pos"] = self._ff_step(state["ff_pos"], goal_model)
+                return
+            c = pid.update(target, self.y_meas)
+            u = self._apply(self._command_for(c, goal_model, u_ref))
+            lo, hi = pid.output_limits
+            pid.track(min(max(self._achieved(u, goal_model, u_ref), lo), hi))
+
+        act()
+        for _ in range(int(n_frames)):
+            x, y, ok = self._grab_measure()
+            if not ok:  # safety: hold the last safe command, do not integrate, flag the row
+                self._record(x, y, False, target=target, stage=stage, held=True)
+                continue
+            self._record(x, y, True, target=target, stage=stage, held=False)
+            act()
+
+    def _ff_step(self, pos: float, goal: float) -> float:
+        step = goal - pos
+        if abs(step) > self.max_step_px:
+            step = math.copysign(self.max_step_px, step)
+        pos = goal if abs(goal - pos - step) < 1e-12 else pos + step
+        self._apply(self.model.inverse(pos))
+        return pos
+
+    def macro_handover(self, target: float, macro, *, pixel_size_nm: float, chunk_px: float = 40.0,
+                       settle_frames: int = 2, max_chunks: int = 200) -> None:
+        """Move with the macro stepper so that ``target`` ends near the middle of the piezo's reach.
+
+        The macro moves in chunks of at most ``chunk_px`` so the tracker can follow; the first chunk
+        measures the stepper's image gain and sign (px per nm), nothing about it is assumed except the
+        pixel size used for the first chunk's length.
+        """
+        if not (math.isfinite(pixel_size_nm) and pixel_size_nm > 0):
+            raise ValueError(f"pixel_size_nm={pixel_size_nm} must be a positive number")
+        r_lo, r_hi = self.reachable()
+        mid = 0.5 * (r_lo + r_hi)
+        needed = target - mid  # px the macro stage must move the probe
+        nm_per_px = float(pixel_size_nm)
+        m_lo, m_hi = (float(v) for v in macro.limits)
+        for _ in range(max_chunks):
+            r_lo, r_hi = self.reachable()
+            mid = 0.5 * (r_lo + r_hi)
+            needed = target - mid
+            if abs(needed) <= 0.25 * (r_hi - r_lo):
+                return
+            step_px = math.copysign(min(abs(needed), chunk_px), needed)
+            dest = float(macro.position_nm) + step_px * nm_per_px
+            if not m_lo <= dest <= m_hi:
+                raise ValueError(f"macro destination {dest:.6g} nm is outside its limits [{m_lo}, {m_hi}] nm")
+            y_before = self.y_meas
+            macro.move_to(dest)
+            ok = False
+            for _ in range(int(settle_frames)):
+                x, y, ok = self._grab_measure()
+                self._record(x, y, ok, target=target, stage="macro", held=not ok)
+            if not ok:
+                raise RuntimeError("the tracker lost the probe during a macro move; stopped the hand-over")
+            moved = self.y_meas - y_before
+            if abs(moved) < 0.2 * abs(step_px):
+                raise RuntimeError(f"macro move of {step_px * nm_per_px:.4g} nm moved the probe only "
+                                   f"{moved:.3g} px along the axis; wrong stage or direction?")
+            nm_per_px = step_px * nm_per_px / moved
+        raise RuntimeError("macro hand-over did not converge")
+
+    def to_frame(self) -> pd.DataFrame:
+        df = pd.DataFrame(self.rows)
+        df.attrs.update(direction=tuple(self.direction), origin=tuple(self.p0), feedforward=self.feedforward,
+                        model=self.model.kind, axis=self.model.axis, frame_period=self.dt)
+        return df
+
+
+def step_response(microscope, axis, roi, step_px, *, model, feedforward=True, n_frames=60, **params):
+    """Response of the visual servo to a step of ``step_px`` pixels (paper, Fig. 9).
+
+    Parameters
+    ----------
+    microscope, axis
+        Protocol objects; ``axis`` must be the one ``model`` was fitted on.
+    roi : (x, y, w, h)
+        The probe's ROI in the current frame.
+    step_px : float
+        Desired displacement along the axis direction; ``> 0`` moves the probe the way rising voltage
+        does.
+    model : HysteresisModel
+        Its state must match the axis (as after ``fit_hysteresis`` or a previous servo run).
+    feedforward : bool
+        True: the model's inverse makes the move in one step and the PID removes the residual;
+        False: PID only, the model supplies direction and gain.
+    n_frames : int
+        Rows in the result (frame 0 is the frame the ROI refers to).
+    **params
+        ``tracker``, ``pid`` (a :class:`PID`), ``max_slew_v``, ``max_step_px`` -- see :class:`VisualServo`.
+
+    Returns
+    -------
+    DataFrame
+        One row per frame: ``frame, t, u, x, y, displacement, target, ok`` (plus ``held``, ``stage``).
+        ``u`` is the command in effect while the frame was acquired, ``displacement`` the tracked
+        position projected on the axis direction relative to the ROI centre (NaN when ``ok`` is False),
+        ``held`` marks frames where the tracker was lost and the last safe command was held.
+
+    Raises
+    ------
+    ValueError
+        NaN step, a step outside the model's reach, a model fitted on another axis, or a tracker that
+        reports a NaN position as valid.
+    """
+    step_px = float(step_px)
+    if not math.isfinite(step_px):
+        raise ValueError(f"step_px {step_px} is not finite")
+    n_frames = int(n_frames)
+    if n_frames < 2:
+        raise ValueError("n_frames must be >= 2")
+    allowed = {"tracker", "pid", "max_slew_v", "max_step_px"}
+    unknown = set(params) - allowed
+    if unknown:
+        raise TypeError(f"step_response got unknown parameter(s) {sorted(unknown)}; allowed: {sorted(allowed)}")
+    servo = VisualServo(microscope, axis, model, feedforward=feedforward, **params)
+    # refuse an unreachable step before anything moves
+    r_lo, r_hi = servo.reachable()
+    if not r_lo <= step_px <= r_hi:
+        raise ValueError(f"step of {step_px:.4g} px is outside the model's reach from the current state "
+                         f"[{r_lo:.4g}, {r_hi:.4g}] px")
+    servo.start(roi)
+    servo.rows[0]["target"] = step_px
+    servo.goto(step_px, n_frames - 1, stage="feedforward" if feedforward else "pid")
+    return servo.to_frame()
+
+
+def move_to(microscope, axis, roi, distance_px, *, model, macro=None, pixel_size_nm=None, feedforward=True,
+            n_frames=30, **params):
+    """Move the probe by ``distance_px`` along the axis, with a macro/nano hand-over when needed.
+
+    When the piezo cannot reach the target from its current state (per the model), the macro stepper
+    moves first, in tracked chunks, until the target lies near the middle of the piezo's reach; then
+    the visual servo finishes with the piezo (paper: "MACRO and NANO" motions, control switched to the
+    nanopositioner for the fine approach).
+
+    Parameters
+    ----------
+    microscope, axis, roi, model, feedforward, **params
+        As for :func:`step_response`.
+    distance_px : float
+        Desired displacement along the axis direction from the current position.
+    macro : object, optional
+        Macro stepper with ``limits`` (nm), ``position_nm`` and ``move_to(nm)``.
+    pixel_size_nm : float, optional
+        Image pixel size (first macro chunk's length); default ``microscope.pixel_size_nm``.
+    n_frames : int
+        Frames of the nano (piezo) servo phase.
+
+    Returns
+    -------
+    DataFrame
+        As :func:`step_response`, with ``stage`` = ``'start'``, ``'macro'`` or ``'nano'``.
+    """
+    distance_px = float(distance_px)
+    if not math.isfinite(distance_px):
+        raise ValueError(f"distance_px {distance_px} is not finite")
+    servo = VisualServo(microscope, axis, model, feedforward=feedforward, **params)
+    r_lo, r_hi = servo.reachable()
+    needs_macro = not r_lo <= distance_px <= r_hi
+    if needs_macro and macro is None:
+        raise ValueError(f"a move of {distance_px:.4g} px is beyond the piezo's reach [{r_lo:.4g}, {r_hi:.4g}] px;"
+                         " pass macro= for a macro/nano hand-over")
+    servo.start(roi)
+    servo.rows[0]["target"] = distance_px
+    if needs_macro:
+        if pixel_size_nm is None:
+            pixel_size_nm = getattr(microscope, "pixel_size_nm", None)
+        if pixel_size_nm is None:
+            raise ValueError("pixel_size_nm is required for a macro move")
+        servo.macro_handover(distance_px, macro, pixel_size_nm=float(pixel_size_nm))
+    servo.goto(distance_px, int(n_frames), stage="nano")
+    return servo.to_frame()
+
+
+def step_metrics(response: pd.DataFrame, *, final_frames: int = 30) -> pd.Series:
+    """Summary of a step response (paper, Fig. 9).
+
+    Parameters
+    ----------
+    response : DataFrame
+        From :func:`step_response` (columns ``frame, t, displacement, target, ok``).
+    final_frames : int
+        Frames at the end used for the final mean and std (paper: the plateau).
+
+    Returns
+    -------
+    Series
+        ``response_time_1px_s``/``response_frames_1px`` and ``response_time_0p5px_s``/
+        ``response_frames_0p5px`` -- time from the first row until the displacement enters and stays
+        within ±1 px (±0.5 px) of the target (NaN if it never does); ``overshoot_px`` -- largest
+        excursion beyond the target in the direction of the step (0 if none); ``final_mean_px``,
+        ``final_std_px``, ``final_error_px`` over the last ``final_frames`` valid frames; ``n_lost``.
+    """
+    if not isinstance(response, pd.DataFrame):
+        raise TypeError("response must be a DataFrame from step_response")
+    missing = {"frame", "t", "displacement", "target", "ok"} - set(response.columns)
+    if missing:
+        raise ValueError(f"response lacks column(s) {sorted(missing)}")
+    if len(response) < 2:
+        raise ValueError("response has fewer than 2 rows")
+    r = response.reset_index(drop=True)
+    ok = r["ok"].to_numpy(bool) & np.isfinite(r["displacement"].to_numpy(float))
+    target = r["target"].to_numpy(float)
+    step = float(target[-1])
+    err = r["displacement"].to_numpy(float) - target
+    t = r["t"].to_numpy(float)
+    fr = r["frame"].to_numpy(int)
+    out = {"step_px": step}
+    for tol, key in ((1.0, "1px"), (0.5, "0p5px")):
+        bad = np.flatnonzero(ok & (np.abs(err) > tol))
+        # only valid frames after the last violation count; the last valid frame must be inside
+        if not ok.any() or (bad.size and bad[-1] == np.flatnonzero(ok)[-1]):
+            out[f"response_time_{key}_s"], out[f"response_frames_{key}"] = np.nan, np.nan
+            continue
+        after = np.flatnonzero(ok & (np.arange(len(r)) > (bad[-1] if bad.size else -1)))
+        i = after[0]
+        out[f"response_time_{key}_s"] = float(t[i] - t[0])
+        out[f"response_frames_{key}"] = int(fr[i] - fr[0])
+    sgn = 1.0 if step >= 0 else -1.0
+    out["overshoot_px"] = float(max(0.0, np.nanmax(np.where(ok, sgn * err, -np.inf)))) if ok.any() else np.nan
+    d_ok = r["displacement"].to_numpy(float)[ok][-int(final_frames):]
+    out["final_mean_px"] = float(np.mean(d_ok)) if d_ok.size else np.nan
+    out["final_std_px"] = float(np.std(d_ok, ddof=1)) if d_ok.size > 1 else np.nan
+    out["final_error_px"] = out["final_mean_px"] - step
+    out["n_lost"] = int((~ok).sum())
+    return pd.Series(out)

@@ -1,0 +1,414 @@
+"""Visual servo: PID, feed-forward, safety rules, step metrics, macro/nano hand-over.
+
+Most tests run on a fake rig defined here: a Microscope/Axis pair whose 'piezo' is an independent
+hysteresis (weighted play operators on a leaning input, cubic output) with one frame of latency,
+observed by a fake tracker that reports the true position (plus optional noise / lost frames).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from semlab.control import PID, VisualServo, move_to, step_metrics, step_response
+from semlab.hysteresis import characterise_hysteresis, fit_hysteresis
+
+FRAME_PERIOD = 1 / 13
+
+
+class FakeAxis:
+    def __init__(self, rig, name="fake 0 x", limits=(0.0, 100.0)):
+        self.rig, self.name, self.limits = rig, name, limits
+        self.sent = []
+
+    def apply(self, volts):
+        from semlab.protocols import check_command
+
+        v = check_command(volts, self.limits, self.name)
+        self.sent.append(v)
+        self.rig.pending = v
+
+    @property
+    def command(self):
+        return self.rig.pending if self.rig.pending is not None else self.rig.u
+
+
+class FakeMicroscope:
+    def __init__(self, rig):
+        self.rig, self.frame_period = rig, FRAME_PERIOD
+
+    def grab(self):
+        return self.rig.grab()
+
+
+class FakeMacro:
+    def __init__(self, rig, px_per_nm=-1 / 66.0):  # moving +nm moves the probe along -direction
+        self.rig, self.limits, self.px_per_nm = rig, (0.0, 1e6), px_per_nm
+        self.position_nm, self.pending = 5e5, None
+
+    def move_to(self, nm):
+        if not self.limits[0] <= nm <= self.limits[1]:
+            raise ValueError("macro out of range")
+        self.pending = round(nm / 100.0) * 100.0  # 100 nm resolution
+        self.position_nm = self.pending
+
+
+class FakeRig:
+    """Displacement (px) = gain * h(u) where h is a hysteresis the models do not contain exactly."""
+
+    RS = np.array([0.0, 0.05, 0.1, 0.2, 0.3])
+    WS = np.array([100.0, 70.0, 60.0, 60.0, 40.0]) / 330.0
+
+    def __init__(self, hysteresis=True, px_per_travel=400.0, direction_deg=20.0, origin=(150.0, 200.0)):
+        self.hysteresis = hysteresis
+        self.k = px_per_travel
+        th = math.radians(direction_deg)
+        self.d = np.array([math.cos(th), math.sin(th)])
+        self.origin = np.array(origin)
+        self.u, self.pending, self.frame = 0.0, None, -1
+        self.z = self.RS.copy()  # plays after a descent to 0
+        self.macro = FakeMacro(self)
+        self.macro_px = 0.0
+        self.axis = FakeAxis(self)
+        self.microscope = FakeMicroscope(self)
+        self._update(0.0)
+
+    def _update(self, u):
+        v = u / 100.0
+        if self.hysteresis:
+            v = v + 0.15 * v * (1 - v)
+            self.z = np.maximum(v - self.RS, np.minimum(v + self.RS, self.z))
+            h = float(self.WS @ self.z) - float(self.WS @ self.RS)
+            h = h + 0.1 * h**3
+        else:
+            h = v
+        self.disp = self.k * h
+
+    def grab(self):
+        self.frame += 1
+        if self.pending is not None:  # commands act from the next frame
+            self.u, self.pending = self.pending, None
+            self._update(self.u)
+        if self.macro.pending is not None:
+            self.macro_px = (self.macro.pending - 5e5) * self.macro.px_per_nm
+            self.macro.pending = None
+        return np.full((4, 4), self.frame, dtype=np.int64)  # the frame 'shows' its index
+
+    @property
+    def position(self):
+        return self.origin + (self.disp + self.macro_px) * self.d
+
+
+class FakeTracker:
+    def __init__(self, rig, noise_px=0.0, lose=(), nan_ok=(), seed=0):
+        self.rig, self.noise = rig, noise_px
+        self.lose, self.nan_ok = set(lose), set(nan_ok)
+        self.rng = np.random.default_rng(seed)
+        self.updates = 0
+
+    def init(self, frame, roi):
+        x, y, w, h = roi
+        self.centre = np.array([x + (w - 1) / 2, y + (h - 1) / 2])
+        self.ref = self.rig.position.copy()
+
+    def update(self, frame):
+        self.updates += 1
+        k = int(frame[0, 0])
+        if k in self.nan_ok:
+            return (float("nan"), float("nan"), 1.0, True)
+        if k in self.lose:
+            return (float("nan"), float("nan"), 0.0, False)
+        p = self.centre + self.rig.position - self.ref + self.rng.normal(0, self.noise, 2)
+        return (float(p[0]), float(p[1]), 1.0, True)
+
+
+ROI = (100, 100, 101, 101)
+
+
+def characterised(rig, kind="polynomial", **kw):
+    char = characterise_hysteresis(rig.microscope, rig.axis, ROI, u_min=0.0, u_max=100.0, n_steps=30,
+                                   tracker=FakeTracker(rig, **kw))
+    return char, fit_hysteresis(char, kind=kind)
+
+
+@pytest.fixture(scope="module")
+def hysteretic():
+    rig = FakeRig()
+    char, model = characterised(rig)
+    return rig, char, model
+
+
+def go_to_state(rig, model, path):
+    """Drive the fake axis (and the shadow model) along a voltage path, one frame per value."""
+    for u in path:
+        rig.axis.apply(u)
+        model.forward(u)
+        rig.grab()
+
+
+# ---------------------------------------------------------------------------------------------
+# PID
+# ---------------------------------------------------------------------------------------------
+
+
+def test_pid_anti_windup_leaves_saturation_at_once():
+    pid = PID(kp=0.0, ki=1.0, output_limits=(-5.0, 5.0))
+    for _ in range(50):  # a large error held for long: a naive integrator would reach 5000
+        out = pid.update(100.0, 0.0)
+    assert out == 5.0 and pid.integral == pytest.approx(5.0)
+    out = pid.update(0.0, 10.0)  # error reverses: the output leaves the limit in the same step
+    assert out == pytest.approx(-5.0)
+    pid.reset()
+    out = pid.update(0.0, 2.0)
+    assert out == pytest.approx(-2.0)
+
+
+def test_pid_derivative_acts_on_filtered_measurement_not_on_setpoint():
+    pid = PID(kp=0.0, ki=0.0, kd=1.0, derivative_smoothing=0.5)
+    assert pid.update(0.0, 0.0) == 0.0
+    assert pid.update(100.0, 0.0) == 0.0  # setpoint jump: no derivative kick
+    out = pid.update(100.0, 4.0)  # measurement rises 4 -> filtered rises 2
+    assert out == pytest.approx(-2.0)
+
+
+def test_pid_slew_limit():
+    pid = PID(kp=1.0, ki=0.0, slew_limit=0.5)
+    outs = [pid.update(10.0, 0.0) for _ in range(4)]
+    np.testing.assert_allclose(outs, [0.5, 1.0, 1.5, 2.0])
+
+
+def test_pid_refuses_nan_and_bad_gains():
+    pid = PID()
+    with pytest.raises(ValueError, match="measurement"):
+        pid.update(1.0, float("nan"))
+    with pytest.raises(ValueError, match="setpoint"):
+        pid.update(float("nan"), 0.0)
+    with pytest.raises(ValueError, match="gain"):
+        PID(ki=-1.0)
+
+
+# ---------------------------------------------------------------------------------------------
+# characterisation on the fake rig
+# ---------------------------------------------------------------------------------------------
+
+
+def test_characterisation_measures_direction_and_displacement(hysteretic):
+    rig, char, model = hysteretic
+    assert {"step", "u", "x", "y", "displacement", "branch", "ok"} <= set(char.columns)
+    np.testing.assert_allclose(char.attrs["direction"], rig.d, atol=1e-9)
+    assert char.attrs["axis"] == "fake 0 x"
+    # displacement from the tracker = true displacement (fake tracker is exact), 0 at the first point
+    assert char["displacement"].iloc[0] == 0.0
+    top = FakeRig()
+    top._update(100.0)
+    assert char["displacement"].max() == pytest.approx(top.disp, rel=1e-9)
+    # the fitted model sees the hysteresis loop: at mid-range the branches differ by > 10 % of travel
+    assert model.descending(50.0) - model.ascending(50.0) > 0.1 * rig.k
+    # after the characterisation the shadow model is where the axis is
+    assert model.state.u == rig.u == char["u"].iloc[-1]
+
+
+def test_characterisation_flags_lost_frames_and_fit_ignores_them():
+    rig = FakeRig()
+    lost = set(range(80, 200, 9))  # frame indices (preconditioning takes 61 frames)
+    char = characterise_hysteresis(rig.microscope, rig.axis, ROI, u_min=0.0, u_max=100.0, n_steps=30,
+                                   tracker=FakeTracker(rig, lose=lost))
+    assert (~char["ok"]).sum() == len(lost & set(char["frame"]))
+    assert char.loc[~char["ok"], "displacement"].isna().all()
+    model = fit_hysteresis(char)
+    assert model.meta["rms_residual_px"] < 0.02 * rig.k
+
+
+# ---------------------------------------------------------------------------------------------
+# step responses
+# ---------------------------------------------------------------------------------------------
+
+
+def test_step_response_contract_and_one_frame_latency():
+    rig = FakeRig(hysteresis=False)
+    _, model = characterised(rig)
+    go_to_state(rig, model, np.linspace(0, 30, 7))
+    u_before = rig.u
+    resp = step_response(rig.microscope, rig.axis, ROI, 100.0, model=model, n_frames=20,
+                         tracker=FakeTracker(rig))
+    assert list(resp.columns[:8]) == ["frame", "t", "u", "x", "y", "displacement", "target", "ok"]
+    assert len(resp) == 20 and resp["frame"].tolist() == list(range(20))
+    np.testing.assert_allclose(resp["t"], np.arange(20) * FRAME_PERIOD)
+    assert (resp["target"] == 100.0).all()
+    # frame 0 is the ROI's frame: nothing has moved; the feed-forward command shows from frame 1
+    assert resp["displacement"].iloc[0] == 0.0 and resp["u"].iloc[0] == u_before
+    assert resp["u"].iloc[1] > u_before
+    # linear plant + linear model: one step does it
+    assert resp["displacement"].iloc[1] == pytest.approx(100.0, abs=0.05)
+    m = step_metrics(resp)
+    assert m["response_frames_0p5px"] == 1 and m["overshoot_px"] < 0.05
+
+
+def test_step_direction_follows_rising_voltage(hysteretic):
+    rig, _, model = hysteretic
+    go_to_state(rig, model, [40.0])
+    p_before = rig.position.copy()
+    resp = step_response(rig.microscope, rig.axis, ROI, -50.0, model=model, n_frames=12,
+                         tracker=FakeTracker(rig))
+    assert resp["u"].iloc[-1] < 40.0  # a negative step lowers the voltage
+    moved = rig.position - p_before
+    assert moved @ rig.d == pytest.approx(-50.0, abs=0.5)
+
+
+@pytest.mark.parametrize("start", [[20.0], [70.0, 30.0], [100.0, 45.0], [10.0, 80.0, 35.0, 60.0, 40.0]])
+def test_feedforward_settles_within_half_a_pixel_in_six_frames(hysteretic, start):
+    rig, _, model = hysteretic
+    go_to_state(rig, model, start)
+    resp = step_response(rig.microscope, rig.axis, ROI, 100.0, model=model, n_frames=40,
+                         tracker=FakeTracker(rig, noise_px=0.05))
+    m = step_metrics(resp)
+    assert m["response_frames_0p5px"] <= 6
+    assert m["overshoot_px"] <= 0.5
+    assert m["final_std_px"] <= 0.2
+    assert abs(m["final_error_px"]) < 0.1
+
+
+def test_pid_without_feedforward_is_slower_but_gets_there(hysteretic):
+    rig, _, model = hysteretic
+    go_to_state(rig, model, [100.0, 30.0])
+    ff = step_metrics(step_response(rig.microscope, rig.axis, ROI, 100.0, model=model, n_frames=50,
+                                    tracker=FakeTracker(rig)))
+    go_to_state(rig, model, [100.0, 30.0])
+    pid = step_metrics(step_response(rig.microscope, rig.axis, ROI, 100.0, model=model, n_frames=50,
+                                     feedforward=False, tracker=FakeTracker(rig)))
+    assert pid["response_frames_0p5px"] > ff["response_frames_0p5px"]
+    assert abs(pid["final_error_px"]) < 0.5
+
+
+# ---------------------------------------------------------------------------------------------
+# safety
+# ---------------------------------------------------------------------------------------------
+
+
+def test_lost_target_holds_last_safe_command_and_flags_rows(hysteretic):
+    rig, _, model = hysteretic
+    go_to_state(rig, model, [30.0])
+    f0 = rig.frame + 1  # the frame step_response grabs first
+    lost = {f0 + 3, f0 + 4, f0 + 5}
+    resp = step_response(rig.microscope, rig.axis, ROI, 60.0, model=model, n_frames=40,
+                         tracker=FakeTracker(rig, lose=lost))
+    held = resp.index[~resp["ok"]]
+    assert list(held) == [3, 4, 5]
+    assert resp.loc[held, "held"].all() and resp.loc[held, "displacement"].isna().all()
+    # during and right after the lost frames the command does not change
+    assert resp["u"].iloc[3] == resp["u"].iloc[4] == resp["u"].iloc[5] == resp["u"].iloc[6]
+    assert step_metrics(resp)["n_lost"] == 3
+    assert abs(step_metrics(resp)["final_error_px"]) < 0.1
+
+
+def test_commands_never_leave_the_axis_limits(hysteretic):
+    rig, _, model = hysteretic
+    go_to_state(rig, model, [100.0, 60.0])
+    rig.axis.sent.clear()
+    reach = model.displacement_range[1] - model.state.y
+    # a step to the very end of the range with a very aggressive, overshooting PID
+    resp = step_response(rig.microscope, rig.axis, ROI, reach - 0.01, model=model, n_frames=25,
+                         feedforward=False, pid=PID(kp=1.5, ki=1.5), tracker=FakeTracker(rig, noise_px=0.3))
+    lo, hi = rig.axis.limits
+    assert rig.axis.sent and all(lo <= v <= hi for v in rig.axis.sent)
+    assert resp["u"].max() <= hi
+
+
+def test_unreachable_step_is_refused_before_anything_moves(hysteretic):
+    rig, _, model = hysteretic
+    go_to_state(rig, model, [50.0])
+    rig.axis.sent.clear()
+    with pytest.raises(ValueError, match="outside the model's reach"):
+        step_response(rig.microscope, rig.axis, ROI, rig.k, model=model, tracker=FakeTracker(rig))
+    assert rig.axis.sent == []
+
+
+def test_nan_target_and_nan_measurement_are_refused(hysteretic):
+    rig, _, model = hysteretic
+    with pytest.raises(ValueError, match="not finite"):
+        step_response(rig.microscope, rig.axis, ROI, float("nan"), model=model, tracker=FakeTracker(rig))
+    go_to_state(rig, model, [50.0])
+    f0 = rig.frame + 1
+    with pytest.raises(ValueError, match="non-finite position"):
+        step_response(rig.microscope, rig.axis, ROI, 10.0, model=model, n_frames=10,
+                      tracker=FakeTracker(rig, nan_ok={f0 + 2}))
+
+
+def test_model_from_another_axis_is_refused(hysteretic):
+    rig, _, model = hysteretic
+    other = FakeRig()
+    other.axis.name = "fake 1 y"
+    with pytest.raises(ValueError, match="fitted on axis"):
+        step_response(other.microscope, other.axis, ROI, 10.0, model=model, tracker=FakeTracker(other))
+
+
+def test_bad_parameters():
+    rig = FakeRig(hysteresis=False)
+    _, model = characterised(rig)
+    with pytest.raises(TypeError, match="unknown parameter"):
+        step_response(rig.microscope, rig.axis, ROI, 10.0, model=model, gain=3)
+    with pytest.raises(TypeError, match="init"):
+        step_response(rig.microscope, rig.axis, ROI, 10.0, model=model, tracker=object())
+    with pytest.raises(ValueError, match="roi"):
+        step_response(rig.microscope, rig.axis, (1, 2, 0, 5), 10.0, model=model, tracker=FakeTracker(rig))
+
+
+# ---------------------------------------------------------------------------------------------
+# metrics
+# ---------------------------------------------------------------------------------------------
+
+
+def test_step_metrics_on_a_constructed_response():
+    n = 60
+    disp = np.full(n, 100.0)
+    disp[0], disp[1], disp[2], disp[3], disp[4] = 0.0, 90.0, 100.8, 99.4, 100.3
+    disp[10] = 100.7  # leaves the +-0.5 px band once more at frame 10
+    resp = pd.DataFrame({"frame": np.arange(n), "t": np.arange(n) * 0.1, "u": 0.0, "x": 0.0, "y": 0.0,
+                         "displacement": disp, "target": 100.0, "ok": True})
+    m = step_metrics(resp)
+    assert m["response_frames_1px"] == 2 and m["response_time_1px_s"] == pytest.approx(0.2)
+    assert m["response_frames_0p5px"] == 11
+    assert m["overshoot_px"] == pytest.approx(0.8)
+    assert m["final_mean_px"] == 100.0 and m["final_std_px"] == 0.0
+    # a response that ends outside the band never settled
+    resp.loc[n - 1, "displacement"] = 102.0
+    assert np.isnan(step_metrics(resp)["response_frames_1px"])
+    # negative steps: overshoot counts beyond the target in the direction of motion
+    neg = resp.assign(displacement=-disp, target=-100.0)
+    neg.loc[n - 1, "displacement"] = -100.0
+    assert step_metrics(neg)["overshoot_px"] == pytest.approx(0.8)
+    with pytest.raises(ValueError, match="lacks"):
+        step_metrics(resp.drop(columns="ok"))
+
+
+# ---------------------------------------------------------------------------------------------
+# macro / nano hand-over
+# ---------------------------------------------------------------------------------------------
+
+
+def test_macro_nano_handover_for_a_move_beyond_the_piezo(hysteretic):
+    rig, _, model = hysteretic
+    go_to_state(rig, model, [50.0])
+    p0 = rig.position.copy()
+    with pytest.raises(ValueError, match="beyond the piezo"):
+        move_to(rig.microscope, rig.axis, ROI, 900.0, model=model, tracker=FakeTracker(rig))
+    resp = move_to(rig.microscope, rig.axis, ROI, 900.0, model=model, macro=rig.macro, pixel_size_nm=66.0,
+                   n_frames=20, tracker=FakeTracker(rig))
+    assert set(resp["stage"]) == {"start", "macro", "nano"}
+    assert (rig.position - p0) @ rig.d == pytest.approx(900.0, abs=0.5)
+    nano = resp[resp.stage == "nano"]
+    assert abs(nano["displacement"].iloc[-1] - 900.0) < 0.5
+
+
+def test_servo_keeps_the_model_in_step_with_the_axis(hysteretic):
+    rig, _, model = hysteretic
+    go_to_state(rig, model, [35.0])
+    servo = VisualServo(rig.microscope, rig.axis, model, tracker=FakeTracker(rig)).start(ROI)
+    for target in (80.0, 0.0, 80.0, 0.0, 80.0):  # A -> B -> A ..., as the paper's Fig. 7
+        servo.goto(target, 12)
+        assert model.state.u == rig.axis.command
+    df = servo.to_frame()
+    assert abs(df["displacement"].iloc[-1] - 80.0) < 0.5
