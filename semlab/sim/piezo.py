@@ -56,7 +56,7 @@ class PreisachHysteresis:
     """
 
     def __init__(self, lambdas=(3.0, 14.0), weights=(0.45, 0.55), kappa=0.7,
-                 reversible=0.25, nu=0.4):
+                 reversible=0.22, nu=0.4):
         lam = np.asarray(lambdas, float)
         wts = np.asarray(weights, float)
         if lam.shape != wts.shape or lam.ndim != 1 or lam.size == 0:

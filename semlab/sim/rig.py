@@ -40,7 +40,7 @@ def default_hysteresis(manipulator: int, axis: str, seed: int = 0) -> PreisachHy
     rng = np.random.default_rng([seed, 7, manipulator, AXES.index(axis)])
     return PreisachHysteresis(lambdas=(3.0 * rng.uniform(0.9, 1.1), 14.0 * rng.uniform(0.9, 1.1)),
                               weights=(0.45, 0.55), kappa=0.7 * rng.uniform(0.85, 1.15),
-                              reversible=0.25 * rng.uniform(0.9, 1.1), nu=0.4)
+                              reversible=0.22 * rng.uniform(0.9, 1.1), nu=0.4)
 
 
 class SimulatedMicroscope:

@@ -164,35 +164,79 @@ def probe_signed_distance(X, Y, tip_xy, angle_rad, tip_radius_px, half_angle_rad
     return np.where(u * ca + v * sa >= 0, side, apex) - tip_radius_px
 
 
+def _clip_polygon(points, xmin, xmax, ymin, ymax):
+    """Sutherland-Hodgman clipping of a convex polygon to an axis-aligned rectangle."""
+    def clip(pts, inside, cross):
+        out = []
+        for i, p in enumerate(pts):
+            q = pts[i - 1]
+            if inside(p):
+                if not inside(q):
+                    out.append(cross(q, p))
+                out.append(p)
+            elif inside(q):
+                out.append(cross(q, p))
+        return out
+
+    def at_x(x0):
+        return lambda q, p: (x0, q[1] + (p[1] - q[1]) * (x0 - q[0]) / (p[0] - q[0]))
+
+    def at_y(y0):
+        return lambda q, p: (q[0] + (p[0] - q[0]) * (y0 - q[1]) / (p[1] - q[1]), y0)
+
+    pts = list(points)
+    for inside, cross in ((lambda p: p[0] >= xmin, at_x(xmin)), (lambda p: p[0] <= xmax, at_x(xmax)),
+                          (lambda p: p[1] >= ymin, at_y(ymin)), (lambda p: p[1] <= ymax, at_y(ymax))):
+        pts = clip(pts, inside, cross)
+        if not pts:
+            return []
+    return pts
+
+
 def probe_bbox(tip_xy, angle_rad, tip_radius_px, half_angle_rad, margin_px, width, height):
     """Bounding box ``(x0, x1, y0, y1)`` (half-open, clipped) of a probe inside the frame.
 
-    Returns ``None`` when the probe does not reach into the frame.
+    The shaft's cone, widened by ``margin_px`` (blur, rim, jitter) and the tip radius, is
+    clipped to the frame; returns ``None`` when the probe does not reach into the frame.
     """
     tx, ty = float(tip_xy[0]), float(tip_xy[1])
     c, s = math.cos(angle_rad), math.sin(angle_rad)
+    m = margin_px + tip_radius_px
     # long enough to leave the frame from anywhere
     far = math.hypot(width, height) + math.hypot(max(abs(tx), abs(tx - width)),
                                                    max(abs(ty), abs(ty - height)))
+    # the probe is the sharp cone with apex at the tip circle's centre, dilated by the
+    # tip radius; dilate by the margin too, i.e. clip the sharp cone to the frame grown
+    # by R and grow the clipped polygon's bbox by R
+    R = m
     cx, cy = tx - tip_radius_px * c, ty - tip_radius_px * s
-    half = tip_radius_px + far * math.tan(half_angle_rad)
-    px = [tx, cx - far * c - half * s, cx - far * c + half * s]
-    py = [ty, cy - far * s + half * c, cy - far * s - half * c]
-    m = margin_px + tip_radius_px
-    x0 = max(int(math.floor(min(px) - m)), 0)
-    x1 = min(int(math.ceil(max(px) + m)) + 1, width)
-    y0 = max(int(math.floor(min(py) - m)), 0)
-    y1 = min(int(math.ceil(max(py) + m)) + 1, height)
+    half = far * math.tan(half_angle_rad)
+    bx, by = cx - far * c, cy - far * s
+    tri = [(cx, cy), (bx - half * s, by + half * c), (bx + half * s, by - half * c)]
+    poly = _clip_polygon(tri, -R, width - 1 + R, -R, height - 1 + R)
+    if not poly:
+        return None
+    xs = [p[0] for p in poly]
+    ys = [p[1] for p in poly]
+    x0 = max(int(math.floor(min(xs) - R)), 0)
+    x1 = min(int(math.ceil(max(xs) + R)) + 1, width)
+    y0 = max(int(math.floor(min(ys) - R)), 0)
+    y1 = min(int(math.ceil(max(ys) + R)) + 1, height)
     if x0 >= x1 or y0 >= y1:
         return None
-    # a long thin probe crossing a corner: the triangle's bbox is a loose but safe bound
     return x0, x1, y0, y1
 
 
 def _edge_terms(d, sigma, level, rim_amp, rim_w):
     """Blurred coverage and rim for a signed distance map (see module docstring)."""
     if sigma > 0:
-        cov = 0.5 * erfc(d * np.float32(1.0 / (_SQRT2 * sigma)))
+        # erfc is costly: evaluate it only in the band where it differs from 0/1 by
+        # more than ~1e-12 (|d| < 7 sigma); the band boundary is a fixed distance from
+        # the edge, so translations stay exact
+        z = d * np.float32(1.0 / (_SQRT2 * sigma))
+        cov = (z <= 0).astype(d.dtype)
+        band = np.abs(z) < 5.0
+        cov[band] = 0.5 * erfc(z[band])
     else:
         cov = (d <= 0).astype(d.dtype)
     if rim_amp > 0:
