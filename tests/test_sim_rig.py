@@ -1,0 +1,178 @@
+"""The simulated rig: manipulators move the probes in the image, with exact ground truth."""
+
+import math
+
+import numpy as np
+import pytest
+
+from semlab.sim import (Clutter, PiezoParameters, SEMNoise, SimulatedRig, make_sequence)
+from semlab.sim.manipulator import NANO_TRAVEL_NM
+
+QUIET = dict(noise=SEMNoise.off(), clutter=Clutter.none())
+
+
+def _rig(**kw):
+    for k, v in QUIET.items():
+        kw.setdefault(k, v)
+    kw.setdefault("n_manipulators", 2)
+    return SimulatedRig(**kw)
+
+
+def test_commands_take_effect_from_the_next_frame():
+    rig = _rig(piezo=PiezoParameters(creep_per_decade=0.0))
+    rig.microscope.grab()
+    x0 = rig.truth.loc[0, "x"]
+    frame_before = rig.microscope.grab()
+    assert rig.truth.loc[0, "x"] == pytest.approx(x0, abs=1e-9)
+    rig.axis(0, "x").apply(20.0)
+    # nothing has moved yet: the truth is that of the last grabbed frame
+    assert rig.truth.loc[0, "x"] == pytest.approx(x0, abs=1e-9)
+    frame_after = rig.microscope.grab()
+    assert rig.truth.loc[0, "x"] - x0 > 50
+    assert rig.truth.loc[0, "frame"] == 2
+    assert np.any(frame_after != frame_before)
+    # the lag (2 ms) is over long before the mid-frame: the next frame is the same place
+    x1 = rig.truth.loc[0, "x"]
+    rig.microscope.grab()
+    assert rig.truth.loc[0, "x"] == pytest.approx(x1, abs=1e-6)
+
+
+def test_displacement_follows_view_rotation_and_pixel_size():
+    rig = _rig(piezo=PiezoParameters(creep_per_decade=0.0, hysteresis=False))
+    rig.microscope.grab()
+    p0 = rig.truth.loc[0, ["x", "y"]].to_numpy(float)
+    rig.axis(0, "x").apply(10.0)
+    rig.microscope.grab()
+    d = rig.truth.loc[0, ["x", "y"]].to_numpy(float) - p0
+    volts = rig.axis(0, "x").command
+    expect = volts / 100.0 * NANO_TRAVEL_NM["x"] / 66.0
+    th = math.radians(rig.view_angles_deg[0])
+    np.testing.assert_allclose(d, expect * np.array([math.cos(th), math.sin(th)]), atol=1e-9)
+    # y axis: 10 um over 100 V, perpendicular in the image
+    rig.axis(0, "y").apply(50.0)
+    rig.microscope.grab()
+    d2 = rig.truth.loc[0, ["x", "y"]].to_numpy(float) - p0 - d
+    q = rig.axis(0, "y").command / 100.0 * NANO_TRAVEL_NM["y"] / 66.0
+    # (the x step's 2 ms lag tail still contributes exp(-38.5 / 2) * 76 px ~ 3e-7 px)
+    np.testing.assert_allclose(d2, q * np.array([-math.sin(th), math.cos(th)]), atol=1e-6)
+
+
+def test_probe_0_has_room_to_move_300px_and_leaving_the_frame_is_not_an_error():
+    rig = _rig()
+    rig.microscope.grab()
+    x0 = rig.truth.loc[0, "x"]
+    ax = rig.axis(0, "x")
+    ax.apply(65.0)  # the ascending branch is convex: 65 % of the voltage ~ 45 % of the travel
+    rig.microscope.grab()
+    t = rig.truth
+    assert t.loc[0, "x"] - x0 > 300 and t.loc[0, "visible"]
+    ax.apply(100.0)  # 50 um = 757 px: past the frame's right edge
+    frame = rig.microscope.grab()
+    t = rig.truth
+    assert t.loc[0, "x"] > 640 and not t.loc[0, "visible"]
+    assert frame.shape == (480, 640)
+
+
+def test_dac_quantisation_of_commands():
+    rig = _rig()
+    x, y = rig.axis(0, "x"), rig.axis(0, "y")
+    assert x.lsb_volts == pytest.approx(100.0 / 2**16)
+    assert y.lsb_volts == pytest.approx(100.0 / 2**12)
+    code_410 = 410 * y.lsb_volts
+    y.apply(code_410 + 0.4 * y.lsb_volts)
+    assert y.command == pytest.approx(code_410, abs=1e-12)
+    y.apply(code_410 + 0.6 * y.lsb_volts)
+    assert y.command == pytest.approx(code_410 + y.lsb_volts, abs=1e-12)
+    y.apply(10.0)
+    assert abs(y.command - 10.0) <= y.lsb_volts / 2
+
+
+def test_macro_stepper_quantises_to_100nm_and_moves_the_probe():
+    rig = _rig(piezo=PiezoParameters(creep_per_decade=0.0))
+    rig.microscope.grab()
+    p0 = rig.truth.loc[0, ["x", "y"]].to_numpy(float)
+    mac = rig.macro(0, "x")
+    target = mac.position_nm + 1234.0
+    assert mac.move_to(target) == pytest.approx(mac.home_nm + 1200.0)
+    rig.microscope.grab()
+    d = rig.truth.loc[0, ["x", "y"]].to_numpy(float) - p0
+    assert np.hypot(*d) == pytest.approx(1200.0 / 66.0, rel=1e-9)
+    with pytest.raises(ValueError, match="travel"):
+        mac.move_to(13e6)
+    with pytest.raises(ValueError, match="finite"):
+        mac.move_to(float("nan"))
+    assert rig.macro(0, "y").limits == (0.0, 10e6)
+
+
+def test_bad_axis_manipulator_and_commands_raise():
+    rig = _rig()
+    with pytest.raises(ValueError, match="manipulator"):
+        rig.axis(2, "x")
+    with pytest.raises(ValueError, match="manipulator"):
+        rig.axis(-1, "x")
+    with pytest.raises(ValueError, match="axis"):
+        rig.axis(0, "w")
+    with pytest.raises(ValueError, match="axis"):
+        rig.macro(0, "theta")
+    ax = rig.axis(0, "x")
+    for bad in (float("nan"), float("inf"), -0.1, 100.1, "ten"):
+        with pytest.raises(ValueError):
+            ax.apply(bad)
+    with pytest.raises(ValueError, match="n_manipulators"):
+        SimulatedRig(n_manipulators=5)
+
+
+def test_truth_log_and_columns():
+    rig = _rig(n_manipulators=4)
+    for _ in range(3):
+        rig.microscope.grab()
+    log = rig.truth_log
+    assert list(log.columns) == ["frame", "t", "probe", "x", "y", "visible"]
+    assert len(log) == 12
+    np.testing.assert_allclose(log["t"].unique(), (np.arange(3) + 0.5) / 13)
+
+
+def test_moves_200px_sequence_reaches_b_and_returns():
+    seq = make_sequence("moves_200px", seed=1, **QUIET)
+    x = seq.truth["x"].to_numpy()
+    assert len(seq) == 12 + 5 * 36
+    d = x - x[0]
+    # dwell at B: 200 px plus creep; back at A (0 V wipes the hysteresis memory out): 0
+    # plus the creep left over, each bounded by gamma * 200 px * log10(1 + t / t0) with t
+    # at most one cycle (36 frames) after the step
+    creep_max = 0.015 * 200 * math.log10(1 + 36 / 13 / 0.1)
+    at_b = d[12 + 6:12 + 18]
+    assert np.all(np.abs(at_b - 200) < creep_max)
+    assert np.all(np.abs(d[-12:]) < creep_max)
+    np.testing.assert_allclose(seq.truth["frame"], np.arange(len(seq)))
+    assert seq.meta["u_B"] > 0
+
+
+def test_sequence_rois_and_errors():
+    seq = make_sequence("static", n_frames=3, seed=0)
+    x, y, w, h = seq.roi
+    tx, ty = seq.truth.loc[0, ["x", "y"]]
+    assert abs(x + (w - 1) / 2 - tx) <= 0.5 and abs(y + (h - 1) / 2 - ty) <= 0.5
+    with pytest.raises(ValueError, match="kind"):
+        make_sequence("wobble")
+    with pytest.raises(ValueError, match="override"):
+        make_sequence("static", n_frames=2, not_a_parameter=3)
+    with pytest.raises(ValueError, match="n_frames"):
+        make_sequence("static", n_frames=0)
+    with pytest.raises(ValueError, match="roi_size"):
+        make_sequence("static", n_frames=1, roi_size=500)
+    with pytest.raises(ValueError, match="dose"):
+        make_sequence("low_dose", n_frames=1, dose_e_per_px=-1.0)
+
+
+def test_occluder_passes_over_the_probe_shaft():
+    seq = make_sequence("clutter_occluder", n_frames=100, seed=0, n_manipulators=1,
+                        noise=SEMNoise.off())
+    x, y, w, h = seq.roi
+    tx, ty = seq.truth.loc[0, ["x", "y"]]
+    ang = math.radians(10.0)
+    px, py = int(round(tx - 45 * math.cos(ang))), int(round(ty - 45 * math.sin(ang)))
+    vals = seq.frames[:, py, px].astype(float)
+    # on the shaft the probe is bright; the occluder darkens it while passing
+    assert vals.max() - vals.min() > 30
+    assert x <= px < x + w and y <= py < y + h
