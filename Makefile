@@ -32,7 +32,7 @@ chromium:
 	  $$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq chromium >/dev/null; }
 
 test: $(STAMP) chromium
-	SEMLAB_FAST=1 MPLBACKEND=Agg $(BIN)/python -m pytest $(PYTEST_ARGS)
+	SEMLAB_FAST=1 $(BIN)/python -m pytest $(PYTEST_ARGS)
 
 # The unit tests alone (no notebooks, no browser): the quick loop while developing.
 test-fast: $(STAMP)

@@ -32,9 +32,9 @@ def test_notebook_is_stripped(path):
 @pytest.mark.timeout(900)
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.name)
 def test_notebook_executes(path, monkeypatch):
-    # The kernel inherits this environment: fast mode and a non-interactive backend.
+    # The kernel inherits this environment: fast mode, and Jupyter's inline figures.
     monkeypatch.setenv("SEMLAB_FAST", "1")
-    monkeypatch.setenv("MPLBACKEND", "Agg")
+    monkeypatch.delenv("MPLBACKEND", raising=False)
     nb = nbformat.read(path, as_version=4)
     client = NotebookClient(nb, timeout=600, kernel_name="python3",
                             resources={"metadata": {"path": str(path.parent)}})
