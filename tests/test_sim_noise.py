@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from semlab.sim import Clutter, SEMNoise, SimulatedSEM, translation_crb
+from semlab.sim import Clutter, ProbeGeometry, SEMNoise, SimulatedSEM, translation_crb
 from semlab.sim.noise import ELEMENTARY_CHARGE
 
 OFF = SEMNoise.off()
@@ -96,7 +96,7 @@ def test_gray_level_fluctuation_gain_and_offset():
 
 def test_charging_brightens_the_probe():
     noise = OFF.replace(charging_amplitude=0.5, charging_time_s=1.0)
-    sem = _sem(noise, seed=5, clutter=Clutter.none())
+    sem = _sem(noise, seed=5, clutter=Clutter.none(), probe=ProbeGeometry(shading=0.0))
     tip = np.array([[100.0, 48.0]])
     clean = sem.render_clean(tip)
     plateau = noise.brightness + noise.contrast * sem.probe.brightness

@@ -90,7 +90,7 @@ class SEMNoise:
     shot_noise: bool = True
     poisson_exact_below: float = 10.0
     contrast: float = 200.0
-    brightness: float = 20.0
+    brightness: float = 30.0
     read_noise_gray: float = 2.0
     line_correlation: float = 0.5
     line_offset_gray: float = 1.5

@@ -55,6 +55,10 @@ class ProbeGeometry:
         Extra yield of the SEM edge brightening, a bright rim just inside the edge.
     rim_width_nm : float
         Thickness (Gaussian sigma) of that rim; it sits one width inside the edge.
+    shading : float
+        Relative brightness difference across the shaft, from its right-hand side
+        (facing the Everhart-Thornley detector) to its left-hand side: the body's yield
+        is ``brightness * (1 + shading * s)`` with ``s`` in [-1, 1] across the shaft.
     """
 
     tip_diameter_nm: float = 200.0
@@ -62,6 +66,7 @@ class ProbeGeometry:
     brightness: float = 0.55
     rim_amplitude: float = 0.3
     rim_width_nm: float = 50.0
+    shading: float = 0.15
 
     def __post_init__(self):
         if not self.tip_diameter_nm > 0:
@@ -70,6 +75,8 @@ class ProbeGeometry:
             raise ValueError(f"half_angle_deg must lie in [0.5, 45], got {self.half_angle_deg}")
         if self.brightness < 0 or self.rim_amplitude < 0 or self.rim_width_nm <= 0:
             raise ValueError("brightness and rim_amplitude must be >= 0 and rim_width_nm > 0")
+        if not 0 <= self.shading < 1:
+            raise ValueError(f"shading must lie in [0, 1), got {self.shading}")
 
 
 @dataclass(frozen=True)
@@ -129,7 +136,8 @@ class Clutter:
         return cls(n_static=0, n_drifting=0, occluder=False, texture=0.0)
 
 
-def probe_signed_distance(X, Y, tip_xy, angle_rad, tip_radius_px, half_angle_rad):
+def probe_signed_distance(X, Y, tip_xy, angle_rad, tip_radius_px, half_angle_rad,
+                          return_across=False):
     """Signed distance (px) to a tapered probe with a rounded tip.
 
     The shape is a wedge of half-angle ``half_angle_rad`` offset (Minkowski sum) by a
@@ -146,22 +154,34 @@ def probe_signed_distance(X, Y, tip_xy, angle_rad, tip_radius_px, half_angle_rad
         Direction in which the probe points (from shaft to tip).
     tip_radius_px, half_angle_rad : float
         Tip radius and shaft half-angle.
+    return_across : bool
+        Also return the position across the shaft, about -1 on its left edge and 1 on
+        its right edge (looking from the shaft to the tip; smooth, not clipped).
 
     Returns
     -------
-    ndarray
-        Signed distance, negative inside the probe.
+    ndarray, or (ndarray, ndarray)
+        Signed distance, negative inside the probe (and the across-shaft position).
     """
     c, s = math.cos(angle_rad), math.sin(angle_rad)
     dx = X - tip_xy[0]
     dy = Y - tip_xy[1]
     # u: distance behind the wedge apex (the tip circle centre) along the shaft
     u = -(dx * c + dy * s) - tip_radius_px
-    v = np.abs(dy * c - dx * s)
+    v_signed = dy * c - dx * s
+    v = np.abs(v_signed)
     ca, sa = math.cos(half_angle_rad), math.sin(half_angle_rad)
     side = v * ca - u * sa
     apex = np.sqrt(u * u + v * v)
-    return np.where(u * ca + v * sa >= 0, side, apex) - tip_radius_px
+    d = np.where(u * ca + v * sa >= 0, side, apex) - tip_radius_px
+    if not return_across:
+        return d
+    # a smooth stand-in for the local half-width (max(u, 0) would put a crease on the
+    # probe); the ratio is left unclipped so it stays smooth across the edge, where the
+    # blurred coverage takes over
+    u_pos = 0.5 * (u + np.sqrt(u * u + tip_radius_px * tip_radius_px))
+    half_width = tip_radius_px / ca + u_pos * (sa / ca)
+    return d, v_signed / half_width
 
 
 def _clip_polygon(points, xmin, xmax, ymin, ymax):
@@ -259,7 +279,7 @@ def _grid(x0, x1, y0, y1, row_shift, dtype):
 
 
 def render_probe(buf, tip_xy, angle_rad, tip_radius_px, half_angle_rad, sigma_px,
-                 level, rim_amp, rim_w_px, row_shift=None):
+                 level, rim_amp, rim_w_px, row_shift=None, shading=0.0):
     """Composite one probe onto a yield image in place (only inside its bounding box).
 
     Parameters
@@ -276,6 +296,8 @@ def render_probe(buf, tip_xy, angle_rad, tip_radius_px, half_angle_rad, sigma_px
         Body yield, edge brightening amplitude and width.
     row_shift : (H,) ndarray or None
         Per-line horizontal scan jitter in px.
+    shading : float
+        Relative brightness gradient across the shaft (see :class:`ProbeGeometry`).
 
     Returns
     -------
@@ -291,8 +313,13 @@ def render_probe(buf, tip_xy, angle_rad, tip_radius_px, half_angle_rad, sigma_px
         return None
     x0, x1, y0, y1 = bbox
     X, Y = _grid(x0, x1, y0, y1, row_shift, buf.dtype)
-    d = probe_signed_distance(X, Y, tip_xy, angle_rad, tip_radius_px, half_angle_rad)
-    cov, rim = _edge_terms(d, sigma_px, level, rim_amp, rim_w_px)
+    if shading > 0:
+        d, across = probe_signed_distance(X, Y, tip_xy, angle_rad, tip_radius_px,
+                                          half_angle_rad, return_across=True)
+        level = level * (1.0 + shading * across.astype(buf.dtype))
+    else:
+        d = probe_signed_distance(X, Y, tip_xy, angle_rad, tip_radius_px, half_angle_rad)
+    cov, rim = _edge_terms(d, sigma_px, 0.0, rim_amp, rim_w_px)
     sub = buf[y0:y1, x0:x1]
     sub += cov * (level - sub)
     if rim is not None:

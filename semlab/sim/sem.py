@@ -200,7 +200,7 @@ class SimulatedSEM:
         for i, tip in enumerate(tips):
             render_probe(img, tip, math.radians(self.probe_angles_deg[i]), r_tip, half, sigma,
                          g.brightness * charge, g.rim_amplitude * charge, self.rim_width_px,
-                         row_shift=row_shift)
+                         row_shift=row_shift, shading=g.shading)
         occ = self.occluder_position(t)
         if occ is not None:
             blur = math.hypot(sigma, self.clutter.occluder_blur_px)
