@@ -20,17 +20,17 @@ from semlab.sim import Clutter, SEMNoise, SimulatedRig
 
 def _configs():
     return [
-        ("default: 4 probes, default noise", dict()),
-        ("1 probe, default noise", dict(n_manipulators=1)),
-        ("4 probes, noise off", dict(noise=SEMNoise.off())),
-        ("low dose (10 pA, exact Poisson)", dict(noise=SEMNoise(beam_current_pA=10.0))),
-        ("gray fluctuation + charging", dict(noise=SEMNoise(gain_fluctuation=0.15,
+        ("default: 4 probes, default noise", {}),
+        ("1 probe, default noise", {"n_manipulators": 1}),
+        ("4 probes, noise off", {"noise": SEMNoise.off()}),
+        ("low dose (10 pA, exact Poisson)", {"noise": SEMNoise(beam_current_pA=10.0)}),
+        ("gray fluctuation + charging", {"noise": SEMNoise(gain_fluctuation=0.15,
                                                             offset_fluctuation_gray=15.0,
-                                                            charging_amplitude=0.5))),
-        ("dense clutter + drifting + occluder", dict(clutter=Clutter(n_static=120, n_drifting=8,
-                                                                     occluder=True))),
-        ("30,000x (6.6 nm/px), 4 probes", dict(pixel_size_nm=6.6)),
-        ("uint16 output", dict(dtype=np.uint16)),
+                                                            charging_amplitude=0.5)}),
+        ("dense clutter + drifting + occluder", {"clutter": Clutter(n_static=120, n_drifting=8,
+                                                                     occluder=True)}),
+        ("30,000x (6.6 nm/px), 4 probes", {"pixel_size_nm": 6.6}),
+        ("uint16 output", {"dtype": np.uint16}),
     ]
 
 
@@ -49,9 +49,9 @@ def bench(n_frames: int, reps: int) -> pd.DataFrame:
                 rig.microscope.grab()
                 _ = rig.truth
             times.append((time.perf_counter() - t0) / n_frames * 1e3)
-        rows.append(dict(configuration=name, ms_per_frame_median=float(np.median(times)),
-                         ms_per_frame_best=float(np.min(times)),
-                         fps=1e3 / float(np.median(times)), frames=n_frames * reps))
+        rows.append({"configuration": name, "ms_per_frame_median": float(np.median(times)),
+                         "ms_per_frame_best": float(np.min(times)),
+                         "fps": 1e3 / float(np.median(times)), "frames": n_frames * reps})
     return pd.DataFrame(rows)
 
 

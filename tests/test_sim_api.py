@@ -5,8 +5,16 @@ import pandas as pd
 import pytest
 
 from semlab.protocols import Axis, Microscope
-from semlab.sim import (Clutter, ProbeGeometry, SEMNoise, SimulatedRig, SimulatedSEM,
-                        make_sequence, pixel_size_from_magnification, translation_crb)
+from semlab.sim import (
+    Clutter,
+    ProbeGeometry,
+    SEMNoise,
+    SimulatedRig,
+    SimulatedSEM,
+    make_sequence,
+    pixel_size_from_magnification,
+    translation_crb,
+)
 
 
 def test_pixel_size_matches_paper():

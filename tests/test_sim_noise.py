@@ -183,5 +183,7 @@ def test_crb_bad_inputs():
         translation_crb(sem, tips, (0, 0, 200))
     with pytest.raises(ValueError, match="probe"):
         translation_crb(sem, tips, (50, 150, 200, 200), probe=3)
+    with pytest.raises(ValueError, match="off the"):
+        translation_crb(sem, [[-20.0, 250.0]], (50, 150, 200, 200))
     with pytest.raises(ValueError, match="infinite"):
         translation_crb(SimulatedSEM(seed=0, noise=OFF, dtype=np.float64), tips, (50, 150, 200, 200))

@@ -32,7 +32,7 @@ def _centroid(img, axis):
 # distance has a crease on the probe's axis inside the narrow tip, where the blurred edges
 # meet; that creased region (~10 px long, ~3 px wide, out of ~2000 px^2 of probe signal)
 # aliases the centroid by at most (area ratio) / (2 pi) ~ 2e-3 px.
-_SMOOTH = dict(beam_sigma_px=1.0, pixel_size_nm=6.6, probe=ProbeGeometry(rim_amplitude=0.0))
+_SMOOTH = {"beam_sigma_px": 1.0, "pixel_size_nm": 6.6, "probe": ProbeGeometry(rim_amplitude=0.0)}
 
 
 @settings(max_examples=25, deadline=None)

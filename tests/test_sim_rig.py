@@ -5,10 +5,10 @@ import math
 import numpy as np
 import pytest
 
-from semlab.sim import (Clutter, PiezoParameters, SEMNoise, SimulatedRig, make_sequence)
+from semlab.sim import Clutter, PiezoParameters, SEMNoise, SimulatedRig, make_sequence
 from semlab.sim.manipulator import NANO_TRAVEL_NM
 
-QUIET = dict(noise=SEMNoise.off(), clutter=Clutter.none())
+QUIET = {"noise": SEMNoise.off(), "clutter": Clutter.none()}
 
 
 def _rig(**kw):
@@ -163,6 +163,17 @@ def test_sequence_rois_and_errors():
         make_sequence("static", n_frames=1, roi_size=500)
     with pytest.raises(ValueError, match="dose"):
         make_sequence("low_dose", n_frames=1, dose_e_per_px=-1.0)
+    with pytest.raises(ValueError, match="off the"):
+        make_sequence("static", n_frames=1, n_manipulators=1, base_positions=[(-30.0, 100.0)])
+
+
+def test_same_seed_same_frames_different_seed_different_noise():
+    a = make_sequence("static", n_frames=2, seed=4)
+    b = make_sequence("static", n_frames=2, seed=4)
+    c = make_sequence("static", n_frames=2, seed=5)
+    np.testing.assert_array_equal(a.frames, b.frames)
+    assert np.mean(a.frames != c.frames) > 0.5
+    assert a.crb == b.crb
 
 
 def test_occluder_passes_over_the_probe_shaft():
@@ -171,7 +182,7 @@ def test_occluder_passes_over_the_probe_shaft():
     x, y, w, h = seq.roi
     tx, ty = seq.truth.loc[0, ["x", "y"]]
     ang = math.radians(10.0)
-    px, py = int(round(tx - 45 * math.cos(ang))), int(round(ty - 45 * math.sin(ang)))
+    px, py = round(tx - 45 * math.cos(ang)), round(ty - 45 * math.sin(ang))
     vals = seq.frames[:, py, px].astype(float)
     # on the shaft the probe is bright; the occluder darkens it while passing
     assert vals.max() - vals.min() > 30

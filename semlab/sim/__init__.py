@@ -22,8 +22,23 @@ from .sem import SimulatedSEM
 from .sequences import SEQUENCE_KINDS, Sequence, make_sequence
 
 __all__ = [
-    "SEMNoise", "Clutter", "ProbeGeometry", "SimulatedSEM", "SimulatedRig",
-    "SimulatedMicroscope", "make_sequence", "Sequence", "SEQUENCE_KINDS", "translation_crb",
-    "translation_fisher", "pixel_size_from_magnification", "beam_blur_sigma_px",
-    "PreisachHysteresis", "LogCreep", "DAC", "PiezoParameters", "NanoAxis", "MacroStepper",
+    "DAC",
+    "SEQUENCE_KINDS",
+    "Clutter",
+    "LogCreep",
+    "MacroStepper",
+    "NanoAxis",
+    "PiezoParameters",
+    "PreisachHysteresis",
+    "ProbeGeometry",
+    "SEMNoise",
+    "Sequence",
+    "SimulatedMicroscope",
+    "SimulatedRig",
+    "SimulatedSEM",
+    "beam_blur_sigma_px",
+    "make_sequence",
+    "pixel_size_from_magnification",
+    "translation_crb",
+    "translation_fisher",
 ]

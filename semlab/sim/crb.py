@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["translation_crb", "translation_fisher", "check_roi"]
+__all__ = ["check_roi", "translation_crb", "translation_fisher"]
 
 
 def check_roi(roi, width: int, height: int):
@@ -61,6 +61,10 @@ def translation_fisher(sem, tips, roi, probe=0, *, t=None, h=1e-2, nuisance="aut
     if isinstance(probe, bool) or not isinstance(probe, (int, np.integer)) or not 0 <= probe < len(tips):
         raise ValueError(f"probe {probe!r} is not one of the {len(tips)} tips")
     x0, y0, w, hh = check_roi(roi, sem.width, sem.height)
+    tx, ty = tips[probe]
+    if not (0 <= tx <= sem.width - 1 and 0 <= ty <= sem.height - 1):
+        raise ValueError(f"probe {probe}'s tip ({tx:.1f}, {ty:.1f}) px is off the "
+                         f"{sem.width}x{sem.height} frame")
     if not h > 0:
         raise ValueError("h must be > 0")
     nz = sem.noise
@@ -162,7 +166,8 @@ def translation_crb(sem, tips, roi, probe=0, *, t=None, h=1e-2, nuisance="auto")
     Raises
     ------
     ValueError
-        ROI off the frame, unknown probe, or a noise-free model (infinite information).
+        ROI off the frame, probe tip off the frame, unknown probe, or a noise-free model
+        (infinite information).
 
     Notes
     -----

@@ -17,8 +17,17 @@ import math
 from ..protocols import check_command
 from .piezo import DAC, PiezoAxis, PiezoParameters, PreisachHysteresis
 
-__all__ = ["MacroStepper", "NanoAxis", "Manipulator", "AXES", "NANO_TRAVEL_NM",
-           "MACRO_TRAVEL_NM", "DAC_BITS", "PIEZO_VOLTS", "MACRO_RESOLUTION_NM"]
+__all__ = [
+    "AXES",
+    "DAC_BITS",
+    "MACRO_RESOLUTION_NM",
+    "MACRO_TRAVEL_NM",
+    "NANO_TRAVEL_NM",
+    "PIEZO_VOLTS",
+    "MacroStepper",
+    "Manipulator",
+    "NanoAxis",
+]
 
 AXES = ("x", "y", "z")
 NANO_TRAVEL_NM = {"x": 50_000.0, "y": 10_000.0, "z": 50_000.0}

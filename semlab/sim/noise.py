@@ -25,7 +25,7 @@ from dataclasses import asdict, dataclass, fields, replace
 
 import numpy as np
 
-__all__ = ["SEMNoise", "ELEMENTARY_CHARGE", "ar1_kernel"]
+__all__ = ["ELEMENTARY_CHARGE", "SEMNoise", "ar1_kernel"]
 
 ELEMENTARY_CHARGE = 1.602176634e-19
 
@@ -129,13 +129,13 @@ class SEMNoise:
             raise ValueError(f"SEMNoise.contrast must be > 0, got {self.contrast}")
 
     @classmethod
-    def off(cls) -> "SEMNoise":
+    def off(cls) -> SEMNoise:
         """All effects off: ``acquire`` then returns ``render_clean`` (up to quantisation)."""
         return cls(shot_noise=False, read_noise_gray=0.0, line_correlation=0.0,
                    line_offset_gray=0.0, line_jitter_px=0.0, gain_fluctuation=0.0,
                    offset_fluctuation_gray=0.0, charging_amplitude=0.0, drift_px_per_s=0.0)
 
-    def replace(self, **changes) -> "SEMNoise":
+    def replace(self, **changes) -> SEMNoise:
         """A copy with some parameters changed (validated)."""
         return replace(self, **changes)
 
@@ -189,5 +189,5 @@ def ar1_kernel(rho: float, tol: float = 1e-6) -> np.ndarray:
     """
     if rho <= 0:
         return np.ones(1, np.float32)
-    k = max(int(math.ceil(math.log(tol) / math.log(rho))), 1)
+    k = max(math.ceil(math.log(tol) / math.log(rho)), 1)
     return (math.sqrt(1 - rho * rho) * rho ** np.arange(k)).astype(np.float32)

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["pixel_size_from_magnification", "beam_blur_sigma_px", "REFERENCE_FIELD_NM"]
+__all__ = ["REFERENCE_FIELD_NM", "beam_blur_sigma_px", "pixel_size_from_magnification"]
 
 #: Field of view width (nm) times magnification for the paper's 640-px-wide frame:
 #: 66 nm/px * 640 px * 3,000 = 126.72 mm, i.e. a 12.672 cm reference display width.

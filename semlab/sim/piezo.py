@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import exprel
 
-__all__ = ["PreisachHysteresis", "LogCreep", "DAC", "PiezoAxis", "PiezoParameters"]
+__all__ = ["DAC", "LogCreep", "PiezoAxis", "PiezoParameters", "PreisachHysteresis"]
 
 
 class PreisachHysteresis:
@@ -211,7 +211,7 @@ class DAC:
 
     def code(self, volts: float) -> int:
         """Nearest code for ``volts`` (clipped to the code range)."""
-        c = int(round((volts - self.u0) / self.lsb))
+        c = round((volts - self.u0) / self.lsb)
         return min(max(c, 0), 2**self.bits - 1)
 
     def quantise(self, volts: float) -> float:

@@ -19,19 +19,25 @@ import numpy as np
 import pandas as pd
 
 from .manipulator import AXES, Manipulator, check_axis_name
-from .noise import SEMNoise
 from .piezo import PiezoParameters, PreisachHysteresis
-from .scene import DEFAULT_PROBE_ANGLES_DEG, Clutter, ProbeGeometry
+from .scene import DEFAULT_PROBE_ANGLES_DEG
 from .sem import SimulatedSEM
 
-__all__ = ["SimulatedRig", "SimulatedMicroscope", "DEFAULT_BASE_POSITIONS",
-           "DEFAULT_VIEW_ANGLES_DEG", "default_hysteresis"]
+__all__ = [
+    "DEFAULT_BASE_POSITIONS",
+    "DEFAULT_VIEW_ANGLES_DEG",
+    "SimulatedMicroscope",
+    "SimulatedRig",
+    "default_hysteresis",
+]
 
 #: Tip positions (px, 640x480 frame) with all piezos at 0 V and the steppers at home.
 #: Probe 0 sits centre-left with > 400 px of room along +x.
 DEFAULT_BASE_POSITIONS = ((150.0, 250.0), (540.0, 140.0), (400.0, 80.0), (470.0, 400.0))
 #: Image direction (deg) of each manipulator's +x axis; its +y axis is 90 deg further.
 DEFAULT_VIEW_ANGLES_DEG = (2.0, 182.0, 92.0, -88.0)
+#: Image displacement per unit z displacement: the column sees the stage tilted by 5 deg.
+DEFAULT_Z_VIEW = (0.0, -math.sin(math.radians(5.0)))
 _TRUTH_COLUMNS = ["frame", "t", "probe", "x", "y", "visible"]
 
 
@@ -46,7 +52,7 @@ def default_hysteresis(manipulator: int, axis: str, seed: int = 0) -> PreisachHy
 class SimulatedMicroscope:
     """The rig's SEM seen through :class:`semlab.protocols.Microscope`."""
 
-    def __init__(self, rig: "SimulatedRig"):
+    def __init__(self, rig: SimulatedRig):
         self._rig = rig
         self.frame_period = rig.sem.frame_period
 
@@ -88,7 +94,7 @@ class SimulatedRig:
     def __init__(self, n_manipulators=4, pixel_size_nm=66.0, seed=0, noise=None, clutter=None,
                  probe=None, width=640, height=480, frame_period=1 / 13, base_positions=None,
                  view_angles_deg=None, probe_angles_deg=None, piezo=None,
-                 z_view=(0.0, -math.sin(math.radians(5.0))), dtype=np.uint8, beam_sigma_px=None):
+                 z_view=DEFAULT_Z_VIEW, dtype=np.uint8, beam_sigma_px=None):
         if int(n_manipulators) != n_manipulators or not 1 <= n_manipulators <= 4:
             raise ValueError(f"n_manipulators must be 1..4, got {n_manipulators!r}")
         n = int(n_manipulators)

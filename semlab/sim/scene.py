@@ -21,14 +21,14 @@ import numpy as np
 from scipy.special import erfc
 
 __all__ = [
-    "ProbeGeometry",
-    "Clutter",
-    "probe_signed_distance",
-    "probe_bbox",
-    "render_probe",
-    "render_disc",
-    "make_substrate",
     "DEFAULT_PROBE_ANGLES_DEG",
+    "Clutter",
+    "ProbeGeometry",
+    "make_substrate",
+    "probe_bbox",
+    "probe_signed_distance",
+    "render_disc",
+    "render_probe",
 ]
 
 #: Direction in which each manipulator's probe points (degrees, image frame: 0 = +x,
@@ -131,7 +131,7 @@ class Clutter:
             raise ValueError("Clutter.occluder_period_s must be > 0")
 
     @classmethod
-    def none(cls) -> "Clutter":
+    def none(cls) -> Clutter:
         """No clutter at all: flat substrate, no particles, no occluder."""
         return cls(n_static=0, n_drifting=0, occluder=False, texture=0.0)
 
@@ -238,10 +238,10 @@ def probe_bbox(tip_xy, angle_rad, tip_radius_px, half_angle_rad, margin_px, widt
         return None
     xs = [p[0] for p in poly]
     ys = [p[1] for p in poly]
-    x0 = max(int(math.floor(min(xs) - R)), 0)
-    x1 = min(int(math.ceil(max(xs) + R)) + 1, width)
-    y0 = max(int(math.floor(min(ys) - R)), 0)
-    y1 = min(int(math.ceil(max(ys) + R)) + 1, height)
+    x0 = max(math.floor(min(xs) - R), 0)
+    x1 = min(math.ceil(max(xs) + R) + 1, width)
+    y0 = max(math.floor(min(ys) - R), 0)
+    y1 = min(math.ceil(max(ys) + R) + 1, height)
     if x0 >= x1 or y0 >= y1:
         return None
     return x0, x1, y0, y1
@@ -335,8 +335,8 @@ def render_disc(buf, centre_xy, radius_px, sigma_px, level, rim_amp=0.0, rim_w_p
     if row_shift is not None and len(row_shift):
         m += float(np.max(np.abs(row_shift)))
     cx, cy = float(centre_xy[0]), float(centre_xy[1])
-    x0, x1 = max(int(math.floor(cx - m)), 0), min(int(math.ceil(cx + m)) + 1, w)
-    y0, y1 = max(int(math.floor(cy - m)), 0), min(int(math.ceil(cy + m)) + 1, h)
+    x0, x1 = max(math.floor(cx - m), 0), min(math.ceil(cx + m) + 1, w)
+    y0, y1 = max(math.floor(cy - m), 0), min(math.ceil(cy + m) + 1, h)
     if x0 >= x1 or y0 >= y1:
         return None
     X, Y = _grid(x0, x1, y0, y1, row_shift, buf.dtype)

@@ -13,8 +13,14 @@ import numpy as np
 
 from .noise import SEMNoise, ar1_kernel
 from .optics import beam_blur_sigma_px
-from .scene import (DEFAULT_PROBE_ANGLES_DEG, Clutter, ProbeGeometry, make_substrate,
-                    render_disc, render_probe)
+from .scene import (
+    DEFAULT_PROBE_ANGLES_DEG,
+    Clutter,
+    ProbeGeometry,
+    make_substrate,
+    render_disc,
+    render_probe,
+)
 
 __all__ = ["SimulatedSEM"]
 
@@ -246,7 +252,7 @@ class SimulatedSEM:
         nz = self.noise
         rng = self._rng
         t = self.time
-        h, w = self.height, self.width
+        h = self.height
         drift = self.drift_at(t) if nz.drift_px_per_s > 0 else None
         row_shift = (rng.normal(0.0, nz.line_jitter_px, h).astype(np.float32)
                      if nz.line_jitter_px > 0 else None)

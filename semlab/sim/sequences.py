@@ -24,7 +24,7 @@ from .noise import SEMNoise
 from .rig import SimulatedRig, default_hysteresis
 from .scene import Clutter
 
-__all__ = ["Sequence", "make_sequence", "SEQUENCE_KINDS"]
+__all__ = ["SEQUENCE_KINDS", "Sequence", "make_sequence"]
 
 SEQUENCE_KINDS = ("static", "moves_200px", "low_dose", "gray_fluctuation", "clutter_occluder")
 _RIG_KEYS = {"n_manipulators", "pixel_size_nm", "noise", "clutter", "probe", "width", "height",
@@ -192,8 +192,8 @@ def make_sequence(kind: str, n_frames: int | None = None, seed: int = 0, **overr
         while len(schedule) < n_frames:
             schedule += cycle
         schedule = schedule[:n_frames]
-        meta_kind = dict(step_px=step_px, u_A=0.0, u_B=u_b, n_cycles=n_cycles,
-                         move_frames=move, dwell_frames=dwell)
+        meta_kind = {"step_px": step_px, "u_A": 0.0, "u_B": u_b, "n_cycles": n_cycles,
+                         "move_frames": move, "dwell_frames": dwell}
     else:
         n_frames = 100 if n_frames is None else int(n_frames)
         schedule = None
@@ -220,8 +220,11 @@ def make_sequence(kind: str, n_frames: int | None = None, seed: int = 0, **overr
     truth = truth_all[truth_all["probe"] == 0].drop(columns="probe").reset_index(drop=True)
 
     tx, ty = tips0[0]
-    rx = int(round(tx - (roi_size - 1) / 2))
-    ry = int(round(ty - (roi_size - 1) / 2))
+    if not (0 <= tx <= sem.width - 1 and 0 <= ty <= sem.height - 1):
+        raise ValueError(f"probe 0's tip ({tx:.1f}, {ty:.1f}) px is off the {sem.width}x{sem.height} "
+                         "frame in frame 0; check base_positions")
+    rx = round(tx - (roi_size - 1) / 2)
+    ry = round(ty - (roi_size - 1) / 2)
     rx = min(max(rx, 0), sem.width - roi_size)
     ry = min(max(ry, 0), sem.height - roi_size)
     roi = (rx, ry, roi_size, roi_size)
