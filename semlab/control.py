@@ -238,10 +238,19 @@ class VisualServo:
         Largest change of the command per frame (V).
     max_step_px : float, optional
         Largest feed-forward move per frame (px); keeps the probe within the tracker's search window.
+    creep : CreepModel, optional
+        With feed-forward: subtract the creep predicted for the next frame from the feed-forward goal
+        (the steps commanded during this run are recorded in it; it is reset at construction).
+    ki_fine : float, optional
+        Gain scheduling: once the error has been within ``fine_band_px`` for two frames, the integral
+        gain drops to ``ki_fine`` so the loop averages the tracker noise instead of chasing it.
+    fine_band_px : float
+        See ``ki_fine``.
     """
 
     def __init__(self, microscope, axis, model, *, tracker=None, feedforward: bool = True, pid=None,
-                 max_slew_v: float | None = None, max_step_px: float | None = None):
+                 max_slew_v: float | None = None, max_step_px: float | None = None, creep=None,
+                 ki_fine: float | None = None, fine_band_px: float = 1.0):
         if model is None:
             raise ValueError("a hysteresis model is required (it supplies at least direction and gain)")
         model.check_axis(axis)
@@ -249,6 +258,17 @@ class VisualServo:
         self.tracker = _default_tracker(tracker)
         self.feedforward = bool(feedforward)
         self.pid = pid if pid is not None else (PID() if feedforward else PID(ki=0.45))
+        self._ki_coarse = self.pid.ki
+        if ki_fine is not None and not (math.isfinite(ki_fine) and ki_fine > 0):
+            raise ValueError(f"ki_fine={ki_fine} must be a positive number")
+        self.ki_fine, self.fine_band_px = ki_fine, float(fine_band_px)
+        if creep is not None and not callable(getattr(creep, "predict", None)):
+            raise TypeError("creep must be a CreepModel (predict/record/reset)")
+        self.creep = creep if feedforward else None  # without feed-forward nothing to compensate
+        if self.creep is not None:
+            self.creep.reset()
+        self._creep_ref = 0.0
+        self._comp = 0.0
         self.max_slew_v = math.inf if max_slew_v is None else float(max_slew_v)
         self.max_step_px = math.inf if max_step_px is None else float(max_step_px)
         if not (self.max_slew_v > 0 and self.max_step_px > 0):
@@ -281,9 +301,9 @@ class VisualServo:
 
     def _record(self, x, y, ok, *, target, stage, held):
         disp = float((np.array([x, y]) - self.p0) @ self.direction) if ok else float("nan")
-        self.rows.append(dict(frame=self.frame, t=self.frame * self.dt, u=self._u_effect, x=x, y=y,
-                              displacement=disp, target=float(target), ok=bool(ok), held=bool(held),
-                              stage=stage))
+        self.rows.append({"frame": self.frame, "t": self.frame * self.dt, "u": self._u_effect, "x": x,
+                          "y": y, "displacement": disp, "target": float(target), "ok": bool(ok),
+                          "held": bool(held), "stage": stage})
 
     def _grab_measure(self):
         """Grab the next frame (the last command is in effect) and measure; returns (x, y, ok)."""
@@ -310,16 +330,10 @@ class VisualServo:
         self.last_safe_u = u
         return u
 
-    def _command_for(self, c: float, goal_model: float, u_ref: float) -> float:
-        if self.feedforward:
-            lo, hi = self.model.displacement_range
-            return self.model.inverse(min(max(goal_model + c, lo), hi))
-        return u_ref + c / self.model.gain
-
     def _achieved(self, u: float, goal_model: float, u_ref: float) -> float:
         """PID output that corresponds to the command actually applied (for anti-windup)."""
         if self.feedforward:
-            return self.model.state.y - goal_model
+            return self.model.state.y + self._comp - goal_model
         return (u - u_ref) * self.model.gain
 
     def reachable(self) -> tuple[float, float]:
@@ -350,22 +364,32 @@ class VisualServo:
         u_ref = self.u
         pid = self.pid
         pid.reset(0.0)
+        pid.ki = self._ki_coarse
         if self.feedforward:
             lo, hi = self.model.displacement_range
             pid.set_limits(lo - goal_model, hi - goal_model)
         else:
             g = self.model.gain
             pid.set_limits((self.u_lo - u_ref) * g, (self.u_hi - u_ref) * g)
+        # creep already present in the measurement the goal was computed from
+        self._creep_ref = self._creep_at(self.frame + 0.5)
         # the first command is sent right after the latest frame (no frame is wasted); from then on
         # one command per frame, each acting from the next frame
-        state = {"ff_pos": self.model.state.y}
+        state = {"ff_pos": self.model.state.y, "calm": 0}
 
         def act():
             if self.feedforward and state["ff_pos"] != goal_model:
                 state["ff_pos"] = self._ff_step(state["ff_pos"], goal_model)
                 return
+            e = target - self.y_meas
+            state["calm"] = state["calm"] + 1 if abs(e) < self.fine_band_px else 0
+            if self.ki_fine is not None and state["calm"] >= 2:
+                pid.ki = self.ki_fine  # gain scheduling: settled, average the measurement noise
             c = pid.update(target, self.y_meas)
-            u = self._apply(self._command_for(c, goal_model, u_ref))
+            if self.feedforward:
+                u = self._apply_displacement(goal_model + c)
+            else:
+                u = self._apply(u_ref + c / self.model.gain)
             lo, hi = pid.output_limits
             pid.track(min(max(self._achieved(u, goal_model, u_ref), lo), hi))
 
@@ -378,12 +402,36 @@ class VisualServo:
             self._record(x, y, True, target=target, stage=stage, held=False)
             act()
 
+    def _creep_at(self, frames: float, extra=None) -> float:
+        if self.creep is None:
+            return 0.0
+        return self.creep.predict(frames * self.dt, extra)
+
+    def _apply_displacement(self, y_goal: float) -> float:
+        """Feed-forward: the command whose model displacement, plus the creep predicted for the next
+        frame, is ``y_goal`` (creep compensation when a creep model is given)."""
+        lo, hi = self.model.displacement_range
+        t_cmd = self.frame + 1.0  # the command acts from the start of the next frame
+        comp = 0.0
+        u = self.model.inverse(min(max(y_goal, lo), hi))
+        if self.creep is not None:
+            for _ in range(2):  # the step being commanded creeps too: a fixed-point iteration
+                dy = self.model.displacement(u) - self.model.state.y
+                comp = self._creep_at(self.frame + 1.5, (t_cmd * self.dt, dy)) - self._creep_ref
+                u = self.model.inverse(min(max(y_goal - comp, lo), hi))
+        y_before = self.model.state.y
+        u = self._apply(u)
+        if self.creep is not None:
+            self.creep.record(t_cmd * self.dt, self.model.state.y - y_before)
+        self._comp = comp
+        return u
+
     def _ff_step(self, pos: float, goal: float) -> float:
         step = goal - pos
         if abs(step) > self.max_step_px:
             step = math.copysign(self.max_step_px, step)
         pos = goal if abs(goal - pos - step) < 1e-12 else pos + step
-        self._apply(self.model.inverse(pos))
+        self._apply_displacement(pos)
         return pos
 
     def macro_handover(self, target: float, macro, *, pixel_size_nm: float, chunk_px: float = 40.0,
@@ -453,7 +501,8 @@ def step_response(microscope, axis, roi, step_px, *, model, feedforward=True, n_
     n_frames : int
         Rows in the result (frame 0 is the frame the ROI refers to).
     **params
-        ``tracker``, ``pid`` (a :class:`PID`), ``max_slew_v``, ``max_step_px`` -- see :class:`VisualServo`.
+        ``tracker``, ``pid`` (a :class:`PID`), ``max_slew_v``, ``max_step_px``, ``creep``, ``ki_fine``,
+        ``fine_band_px`` -- see :class:`VisualServo`.
 
     Returns
     -------
@@ -475,7 +524,7 @@ def step_response(microscope, axis, roi, step_px, *, model, feedforward=True, n_
     n_frames = int(n_frames)
     if n_frames < 2:
         raise ValueError("n_frames must be >= 2")
-    allowed = {"tracker", "pid", "max_slew_v", "max_step_px"}
+    allowed = {"tracker", "pid", "max_slew_v", "max_step_px", "creep", "ki_fine", "fine_band_px"}
     unknown = set(params) - allowed
     if unknown:
         raise TypeError(f"step_response got unknown parameter(s) {sorted(unknown)}; allowed: {sorted(allowed)}")

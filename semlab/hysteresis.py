@@ -36,13 +36,16 @@ import pandas as pd
 
 __all__ = [
     "BRANCHES",
+    "CreepModel",
     "HysteresisModel",
     "HysteresisState",
     "PIHysteresis",
     "PolynomialHysteresis",
     "axis_identity",
     "characterisation_voltages",
+    "characterise_creep",
     "characterise_hysteresis",
+    "fit_creep",
     "fit_hysteresis",
     "inner_loop_displacement",
     "label_branches",
@@ -180,7 +183,7 @@ def characterisation_voltages(u_min: float, u_max: float, n_steps: int = 30, inn
     us, segs = [], []
     f_prev = 0.0
     for seg, f in enumerate(turns):
-        n = max(1, int(round(abs(f - f_prev) * n_steps)))
+        n = max(1, round(abs(f - f_prev) * n_steps))
         fr = np.linspace(f_prev, f, n + 1)[1:]
         us.extend(u_min + fr * span)
         segs.extend([seg] * n)
@@ -543,7 +546,7 @@ class PolynomialHysteresis(HysteresisModel):
 
     def _advance(self, state, u):
         U0, Un = self.u_range
-        tol = 1e-9 * (Un - U0)
+        tol = 1e-12 * (Un - U0)
         if abs(u - state.u) <= tol:  # below the model's resolution: no move, no reversal
             return state
         rising = u > state.u
@@ -579,7 +582,7 @@ class PolynomialHysteresis(HysteresisModel):
         rising = y_t > st.y
         U0, Un = self.u_range
         stack = list(st.reversals)
-        if rising != st.rising and U0 + 1e-9 * (Un - U0) < st.u < Un - 1e-9 * (Un - U0):
+        if rising != st.rising and U0 + 1e-12 * (Un - U0) < st.u < Un - 1e-12 * (Un - U0):
             stack.append((st.u, st.y))
         u_from = st.u
         xtol = 1e-10 * (Un - U0)
@@ -593,7 +596,9 @@ class PolynomialHysteresis(HysteresisModel):
                     continue
             origin, end = self._curve(stack, rising)
             break
-        f = lambda x: self._eval(origin, end, x, derivative=True)  # noqa: E731
+        def f(x):
+            return self._eval(origin, end, x, derivative=True)
+
         if rising:
             return _newton_bisect(f, u_from, end[0], y_t, xtol=xtol)
         return _newton_bisect(f, end[0], u_from, y_t, xtol=xtol)
@@ -770,10 +775,12 @@ def fit_hysteresis(characterisation: pd.DataFrame, kind: str = "polynomial", *, 
     characterisation : DataFrame
         From :func:`characterise_hysteresis` (columns ``u, displacement, branch`` and optionally ``ok``;
         ``attrs`` ``axis``, ``direction``, ``u_min``, ``u_max``). Rows with ``ok=False`` are excluded.
-    kind : {"polynomial", "pi"}
+    kind : {"polynomial", "pi", "linear"}
         ``"polynomial"``: the paper's 4th-order :math:`P_n, D_n` fitted to the major branches (with the
         two branches forced to meet at U0 and Un so the loop is closed) and eq. 11 for inner curves.
         ``"pi"``: Prandtl-Ishlinskii, fitted to every valid row (inner loops included).
+        ``"linear"``: one straight line through both branches (the paper's coarse "linear fit"; it
+        ignores the hysteresis, a baseline for feed-forward errors).
     order : int
         Polynomial order (the paper: 4).
     n_operators : int
@@ -794,8 +801,8 @@ def fit_hysteresis(characterisation: pd.DataFrame, kind: str = "polynomial", *, 
         too few valid points for the fit; a probe that did not move or moved against the voltage.
     """
     char = _validated_characterisation(characterisation)
-    if kind not in ("polynomial", "pi"):
-        raise ValueError(f"kind must be 'polynomial' or 'pi', got {kind!r}")
+    if kind not in ("polynomial", "pi", "linear"):
+        raise ValueError(f"kind must be 'polynomial', 'pi' or 'linear', got {kind!r}")
     _check_monotonic(char, "ascending", True)
     _check_monotonic(char, "descending", False)
     attrs = dict(char.attrs)
@@ -818,7 +825,6 @@ def fit_hysteresis(characterisation: pd.DataFrame, kind: str = "polynomial", *, 
     y_all = np.concatenate([ya, yd])
     u_cat = np.concatenate([ua, ud])
     spread = np.ptp(y_all)
-    noise = np.median(np.abs(np.diff(ya))) if ya.size > 2 else 0.0
     corr = np.corrcoef(u_cat, y_all)[0, 1] if spread > 0 else 0.0
     if not corr >= 0.5:
         raise ValueError(
@@ -826,10 +832,14 @@ def fit_hysteresis(characterisation: pd.DataFrame, kind: str = "polynomial", *, 
             f"(range {spread:.3g} px, correlation {corr:.2f}); "
             "was the probe tracked, and did it move?"
         )
-    kw = dict(axis=attrs.get("axis", "unknown"), direction=attrs.get("direction", (1.0, 0.0)),
-              meta={"n_points": int(y_all.size), "characterisation_noise_px": float(noise)})
+    kw = {"axis": attrs.get("axis", "unknown"), "direction": attrs.get("direction", (1.0, 0.0)),
+          "meta": {"n_points": int(y_all.size)}}
     if kind == "polynomial":
         model = _fit_polynomial(ua, ya, ud, yd, (u0, un), order, kw)
+    elif kind == "linear":  # one straight line through both branches: no hysteresis at all
+        coef = np.polynomial.polynomial.polyfit((u_cat - u0) / (un - u0), y_all, 1)
+        model = PolynomialHysteresis(coef, coef, (u0, un), **kw)
+        model.kind = "linear"
     else:
         model = _fit_pi(char, (u0, un), n_operators, shape, kw)
     # replay the characterisation so that the memory matches the axis now
@@ -973,7 +983,7 @@ def characterise_hysteresis(microscope, axis, roi, *, u_min=None, u_max=None, n_
     if u_start is None:
         u_start = getattr(axis, "command", None)
     u_start = u_min if u_start is None else _finite(u_start, "u_start")
-    pre = list(np.linspace(u_start, u_min, max(1, int(math.ceil(abs(u_start - u_min) / step_v))) + 1)[1:])
+    pre = list(np.linspace(u_start, u_min, max(1, math.ceil(abs(u_start - u_min) / step_v)) + 1)[1:])
     if precondition:
         up = np.linspace(u_min, u_max, int(n_steps) + 1)[1:]
         pre += list(up) + list(up[::-1][1:]) + [u_min]
@@ -994,7 +1004,7 @@ def characterise_hysteresis(microscope, axis, roi, *, u_min=None, u_max=None, n_
     if pts.shape[0] < 3:
         raise ValueError(f"the tracker followed the probe in only {pts.shape[0]} frame(s); nothing to fit")
     centre = pts.mean(axis=0)
-    _, sv, vt = np.linalg.svd(pts - centre, full_matrices=False)
+    _, _, vt = np.linalg.svd(pts - centre, full_matrices=False)
     direction = vt[0]
     proj = (pts - centre) @ direction
     if np.corrcoef(df.loc[ok, "u"].to_numpy(float), proj)[0, 1] < 0:
@@ -1013,3 +1023,133 @@ def characterise_hysteresis(microscope, axis, roi, *, u_min=None, u_max=None, n_
         off_axis_rms_px=float(np.sqrt(np.mean(off_axis ** 2))), n_lost=int((~ok).sum()),
     )
     return df
+
+
+# ---------------------------------------------------------------------------------------------
+# creep
+# ---------------------------------------------------------------------------------------------
+
+
+class CreepModel:
+    """Logarithmic piezo creep, superposed over the displacement steps the controller commanded.
+
+    .. math:: c(t) = \\gamma \\sum_j \\Delta y_j \\log_{10}\\big(1 + (t - t_j)/t_0\\big)
+
+    the usual creep law of piezo actuators (e.g. Jung & Gweon 2000): after a step of
+    :math:`\\Delta y_j` at :math:`t_j` the actuator keeps moving by :math:`\\gamma` of the step per decade
+    of time. The feed-forward subtracts the predicted growth so that the PID does not have to chase it.
+
+    Parameters
+    ----------
+    gamma : float
+        Creep per decade as a fraction of the step (>= 0).
+    t0 : float
+        Time constant in s (> 0).
+    memory : int
+        Number of recent steps kept (older ones are frozen at their value).
+    """
+
+    def __init__(self, gamma: float, t0: float = 0.1, memory: int = 64):
+        gamma, t0 = _finite(gamma, "creep gamma"), _finite(t0, "creep t0")
+        if gamma < 0 or t0 <= 0 or int(memory) < 1:
+            raise ValueError("creep model needs gamma >= 0, t0 > 0 and memory >= 1")
+        self.gamma, self.t0, self.memory = gamma, t0, int(memory)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget every step."""
+        self._events: list[list[float]] = []
+        self._frozen = 0.0
+
+    def record(self, t: float, dy: float) -> None:
+        """A displacement step ``dy`` (px, as the hysteresis model predicts it) commanded at ``t`` (s)."""
+        if dy == 0.0:
+            return
+        if self._events and self._events[-1][0] == t:
+            self._events[-1][1] += dy
+            return
+        self._events.append([float(t), float(dy)])
+        if len(self._events) > self.memory:
+            t_old, d_old = self._events.pop(0)
+            self._frozen += d_old * self.gamma * math.log10(1.0 + max(t - t_old, 0.0) / self.t0)
+
+    def predict(self, t: float, extra=None) -> float:
+        """Creep displacement (px) at time ``t``; ``extra=(t_j, dy_j)`` adds one more (trial) step."""
+        c = self._frozen
+        events = self._events if extra is None else [*self._events, list(extra)]
+        for tj, dj in events:
+            if t > tj:
+                c += dj * self.gamma * math.log10(1.0 + (t - tj) / self.t0)
+        return c
+
+    def __repr__(self) -> str:
+        return f"<CreepModel gamma={self.gamma:.4g}/decade t0={self.t0:.3g} s>"
+
+
+def fit_creep(t, displacement, step_px, *, t0_grid=None) -> CreepModel:
+    """Fit the logarithmic creep law to a hold after one step.
+
+    Parameters
+    ----------
+    t : (N,) array_like
+        Seconds since the step was commanded (> 0), e.g. ``(k - 0.5) * frame_period`` for frame ``k``
+        after the command (the probe is imaged mid-frame).
+    displacement : (N,) array_like
+        Measured displacement (px) during the hold; NaN entries are ignored.
+    step_px : float
+        Size of the step (px).
+    t0_grid : array_like, optional
+        Candidate time constants (s); default 20 values from 0.01 to 2 s.
+
+    Returns
+    -------
+    CreepModel
+        ``gamma`` by least squares for each ``t0`` (with a free offset), the best ``t0``.
+    """
+    t = np.asarray(t, float)
+    y = np.asarray(displacement, float)
+    step = _finite(step_px, "step_px")
+    good = np.isfinite(t) & np.isfinite(y) & (t > 0)
+    if good.sum() < 4 or step == 0:
+        raise ValueError("a creep fit needs a non-zero step and at least 4 valid samples after it")
+    t, y = t[good], y[good]
+    grid = np.geomspace(0.01, 2.0, 20) if t0_grid is None else np.asarray(t0_grid, float)
+    best = None
+    for t0 in grid:
+        x = step * np.log10(1.0 + t / t0)
+        A = np.column_stack([np.ones_like(x), x])
+        coef, *_ = np.linalg.lstsq(A, y, rcond=None)
+        cost = float(np.sum((A @ coef - y) ** 2))
+        if best is None or cost < best[0]:
+            best = (cost, float(t0), float(coef[1]))
+    return CreepModel(max(best[2], 0.0), best[1])
+
+
+def characterise_creep(microscope, axis, roi, *, model, step_px: float, n_frames: int = 40,
+                       tracker=None) -> tuple[CreepModel, pd.DataFrame]:
+    """Measure creep: one open-loop feed-forward step of ``step_px``, held for ``n_frames`` frames.
+
+    The step is made through ``model`` (its memory is updated). Returns the fitted
+    :class:`CreepModel` and the hold as a DataFrame ``frame, t, u, x, y, ok, displacement``.
+    """
+    from semlab.control import _default_tracker, _read_result, _roi_centre
+
+    model.check_axis(axis)
+    tracker = _default_tracker(tracker)
+    d = np.asarray(model.direction)
+    p0 = np.array(_roi_centre(roi))
+    frame = microscope.grab()
+    tracker.init(frame, tuple(roi))
+    y_before = model.state.y
+    u = model.inverse(y_before + float(step_px))
+    axis.apply(u)
+    dy = model.forward(u) - y_before
+    T = float(microscope.frame_period)
+    rows = []
+    for k in range(1, int(n_frames) + 1):
+        x, y, _, ok = _read_result(tracker.update(microscope.grab()))
+        ok = ok and math.isfinite(x) and math.isfinite(y)
+        disp = float((np.array([x, y]) - p0) @ d) if ok else float("nan")
+        rows.append((k, (k - 0.5) * T, u, x, y, ok, disp))
+    df = pd.DataFrame(rows, columns=["frame", "t", "u", "x", "y", "ok", "displacement"])
+    return fit_creep(df["t"], df["displacement"], dy), df

@@ -62,8 +62,10 @@ class FakeRig:
     RS = np.array([0.0, 0.05, 0.1, 0.2, 0.3])
     WS = np.array([100.0, 70.0, 60.0, 60.0, 40.0]) / 330.0
 
-    def __init__(self, hysteresis=True, px_per_travel=400.0, direction_deg=20.0, origin=(150.0, 200.0)):
+    def __init__(self, hysteresis=True, px_per_travel=400.0, direction_deg=20.0, origin=(150.0, 200.0),
+                 creep=0.0):
         self.hysteresis = hysteresis
+        self.creep_gamma, self.creep_steps = creep, []  # log creep, 0.1 s time constant
         self.k = px_per_travel
         th = math.radians(direction_deg)
         self.d = np.array([math.cos(th), math.sin(th)])
@@ -91,7 +93,9 @@ class FakeRig:
         self.frame += 1
         if self.pending is not None:  # commands act from the next frame
             self.u, self.pending = self.pending, None
+            before = self.disp
             self._update(self.u)
+            self.creep_steps.append((self.frame * FRAME_PERIOD, self.disp - before))
         if self.macro.pending is not None:
             self.macro_px = (self.macro.pending - 5e5) * self.macro.px_per_nm
             self.macro.pending = None
@@ -99,7 +103,9 @@ class FakeRig:
 
     @property
     def position(self):
-        return self.origin + (self.disp + self.macro_px) * self.d
+        t = (self.frame + 0.5) * FRAME_PERIOD  # imaged mid-frame
+        creep = sum(dy * self.creep_gamma * math.log10(1 + (t - tj) / 0.1) for tj, dy in self.creep_steps)
+        return self.origin + (self.disp + creep + self.macro_px) * self.d
 
 
 class FakeTracker:
@@ -283,6 +289,27 @@ def test_pid_without_feedforward_is_slower_but_gets_there(hysteretic):
     assert abs(pid["final_error_px"]) < 0.5
 
 
+def test_creep_compensation_removes_the_creep_lag():
+    from semlab.hysteresis import CreepModel
+
+    _, model = characterised(FakeRig(hysteresis=False))  # an exact model of the creep-free piezo
+    rig = FakeRig(hysteresis=False, creep=0.02)
+
+    def step(**kw):
+        go_to_state(rig, model, [0.0, 20.0])
+        for _ in range(30):
+            rig.grab()
+        rig.creep_steps.clear()  # only the step's own creep (the model knows nothing older)
+        return step_metrics(step_response(rig.microscope, rig.axis, ROI, 100.0, model=model, n_frames=30,
+                                          pid=PID(ki=0.3), tracker=FakeTracker(rig), **kw))
+
+    plain, comp = step(), step(creep=CreepModel(0.02, 0.1))
+    # without compensation the probe runs ahead of the target by the creep growth and the integrator
+    # lags behind it; with the creep law in the feed-forward nothing is left to chase
+    assert plain["overshoot_px"] > 0.3
+    assert comp["overshoot_px"] < 0.02 and comp["response_frames_0p5px"] == 1
+
+
 # ---------------------------------------------------------------------------------------------
 # safety
 # ---------------------------------------------------------------------------------------------
@@ -338,7 +365,7 @@ def test_nan_target_and_nan_measurement_are_refused(hysteretic):
 
 
 def test_model_from_another_axis_is_refused(hysteretic):
-    rig, _, model = hysteretic
+    _, _, model = hysteretic
     other = FakeRig()
     other.axis.name = "fake 1 y"
     with pytest.raises(ValueError, match="fitted on axis"):

@@ -112,7 +112,7 @@ def test_inner_loop_derivative_matches_finite_difference():
     m = poly_model()
     for origin, end in [((30.0, 20.0), (80.0, 70.0)), ((70.0, 66.0), (20.0, 12.0))]:
         u = np.linspace(min(origin[0], end[0]), max(origin[0], end[0]), 7)[1:-1]
-        y, dy = inner_loop_displacement(u, origin, end, m.ascending, m.descending, (U0, UN), derivative=True)
+        _, dy = inner_loop_displacement(u, origin, end, m.ascending, m.descending, (U0, UN), derivative=True)
         h = 1e-5
         yp = inner_loop_displacement(u + h, origin, end, m.ascending, m.descending, (U0, UN))
         ym = inner_loop_displacement(u - h, origin, end, m.ascending, m.descending, (U0, UN))
@@ -356,3 +356,38 @@ def test_pi_weights_must_allow_an_inverse():
         PIHysteresis([0.0, 1.0], 0.0, (U0, UN))
     with pytest.raises(ValueError, match="non-negative"):
         PIHysteresis([1.0, -1.0], 0.0, (U0, UN))
+
+
+# ---------------------------------------------------------------------------------------------
+# linear baseline and creep
+# ---------------------------------------------------------------------------------------------
+
+
+def test_linear_kind_has_no_hysteresis():
+    char = synthetic_characterisation()
+    lin = fit_hysteresis(char, kind="linear")
+    assert lin.kind == "linear"
+    us = np.linspace(U0, UN, 7)
+    np.testing.assert_allclose(lin.ascending(us), lin.descending(us))
+    # inner curves of a line are the line itself: the prediction does not depend on the history
+    a = lin.predict([80.0, 30.0, 55.0], reset=True)[-1]
+    assert a == pytest.approx(lin.predict([55.0], reset=True)[-1], abs=1e-9)
+
+
+def test_creep_model_superposes_log_steps_and_fit_recovers_gamma():
+    from semlab.hysteresis import CreepModel, fit_creep
+
+    c = CreepModel(0.02, t0=0.1)
+    c.record(0.0, 100.0)
+    assert c.predict(0.9) == pytest.approx(100 * 0.02 * np.log10(10.0))
+    c.record(1.0, -50.0)
+    assert c.predict(1.9) == pytest.approx(2.0 * np.log10(20.0) - 1.0 * np.log10(10.0))
+    assert c.predict(-1.0) == 0.0
+    t = (np.arange(1, 41) - 0.5) / 13
+    y = 100.0 + 100 * 0.015 * np.log10(1 + t / 0.1) + np.random.default_rng(3).normal(0, 0.02, t.size)
+    fit = fit_creep(t, y, 100.0, t0_grid=[0.05, 0.1, 0.2])
+    assert fit.t0 == 0.1 and fit.gamma == pytest.approx(0.015, rel=0.1)
+    with pytest.raises(ValueError):
+        fit_creep(t[:3], y[:3], 100.0)
+    with pytest.raises(ValueError):
+        CreepModel(-0.1)
