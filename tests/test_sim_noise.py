@@ -32,6 +32,11 @@ def test_dose_follows_dwell_time():
     n2 = n.replace(dwell_time_s=2 * 0.8 / 13 / (640 * 480))
     assert n2.dose(1 / 13, 640 * 480) == pytest.approx(2 * d1)
     assert SEMNoise(dose_e_per_px=7.0).dose(1.0, 1) == 7.0
+    # a fixed detector gain: half the dose, half the contrast
+    g = SEMNoise(detector_gain=2.0)
+    assert g.effective_contrast(1 / 13, 640 * 480) == pytest.approx(2.0 * d1)
+    sem = SimulatedSEM(noise=g, seed=0)
+    assert sem.contrast == pytest.approx(2.0 * d1) and sem.gain_gray_per_electron == 2.0
 
 
 @pytest.mark.parametrize("dose", [200.0, 4.0])  # Gaussian and exact-Poisson regimes

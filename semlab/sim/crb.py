@@ -82,7 +82,7 @@ def translation_fisher(sem, tips, roi, probe=0, *, t=None, h=1e-2, nuisance="aut
     # white variance per pixel (whole frame, for the stationary start of each row)
     white = np.full(m.shape, nz.read_noise_gray**2 + sem.quantisation_variance)
     if nz.shot_noise:
-        g_e = nz.contrast / sem.dose
+        g_e = sem.gain_gray_per_electron
         white = white + g_e * np.maximum(m - nz.brightness, 0.0)
     if not np.all(white > 0):
         raise ValueError("the noise model has zero variance somewhere: the bound is infinite")

@@ -6,7 +6,8 @@ Signal chain for one frame, in the order the instrument applies it:
    a pixel of yield ``Y`` emits a Poisson number of detected electrons with mean
    ``lam = dose * Y`` (shot noise).
 2. The detector maps electrons to gray levels with gain ``g = contrast / dose`` (the
-   operator sets contrast so that yield 1 spans ``contrast`` gray levels) on top of
+   operator sets contrast so that yield 1 spans ``contrast`` gray levels; or a fixed
+   ``detector_gain`` in gray levels per electron, then ``contrast = g * dose``) on top of
    the black level ``brightness``; Gaussian read noise is added.
 3. The video amplifier's limited bandwidth correlates the noise along the scan line:
    an AR(1) process along x with coefficient ``line_correlation`` (variance preserved).
@@ -52,6 +53,9 @@ class SEMNoise:
         Gaussian of the same mean and variance is used (speed; skewness < 0.32).
     contrast : float
         Gray levels spanned by yield 1 (the operator's contrast setting).
+    detector_gain : float or None
+        Fixed detector gain in gray levels per detected electron; overrides
+        ``contrast`` (which becomes ``detector_gain * dose``: less dose, darker image).
     brightness : float
         Black level in gray levels.
     read_noise_gray : float
@@ -90,6 +94,7 @@ class SEMNoise:
     shot_noise: bool = True
     poisson_exact_below: float = 10.0
     contrast: float = 200.0
+    detector_gain: float | None = None
     brightness: float = 30.0
     read_noise_gray: float = 2.0
     line_correlation: float = 0.5
@@ -127,6 +132,8 @@ class SEMNoise:
             raise ValueError("SEMNoise.charging_time_s must be > 0 when charging is on")
         if self.contrast <= 0:
             raise ValueError(f"SEMNoise.contrast must be > 0, got {self.contrast}")
+        if self.detector_gain is not None and self.detector_gain <= 0:
+            raise ValueError(f"SEMNoise.detector_gain must be > 0, got {self.detector_gain}")
 
     @classmethod
     def off(cls) -> SEMNoise:
@@ -168,8 +175,16 @@ class SEMNoise:
             raise ValueError("SEMNoise: the dose is 0 (beam current 0); switch shot_noise off instead")
         return dose
 
+    def effective_contrast(self, frame_period: float, n_pixels: int) -> float:
+        """Gray levels spanned by yield 1: ``contrast``, or ``detector_gain * dose``."""
+        if self.detector_gain is None:
+            return float(self.contrast)
+        return self.detector_gain * self.dose(frame_period, n_pixels)
+
     def gain_gray_per_electron(self, frame_period: float, n_pixels: int) -> float:
         """Detector gain in gray levels per detected electron (``contrast / dose``)."""
+        if self.detector_gain is not None:
+            return float(self.detector_gain)
         d = self.dose(frame_period, n_pixels)
         return self.contrast / d if d > 0 else 0.0
 

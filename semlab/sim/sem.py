@@ -99,6 +99,13 @@ class SimulatedSEM:
         self.seed = seed
         self.n_pixels = self.width * self.height
         self.dose = self.noise.dose(self.frame_period, self.n_pixels)
+        #: gray levels spanned by yield 1 and gray levels per detected electron
+        self.contrast = self.noise.effective_contrast(self.frame_period, self.n_pixels)
+        if not self.contrast > 0:
+            raise ValueError("the detector maps no signal to gray levels (contrast 0): "
+                             "with detector_gain set, the dose must be > 0")
+        self.gain_gray_per_electron = self.noise.gain_gray_per_electron(self.frame_period,
+                                                                        self.n_pixels)
 
         scene_rng = np.random.default_rng([seed, 1])
         self._rng = np.random.default_rng([seed, 2])
@@ -227,13 +234,13 @@ class SimulatedSEM:
         Returns
         -------
         (H, W) ndarray of float64
-            ``brightness + contrast * yield``: no noise, drift, jitter, charging,
+            ``brightness + contrast * yield`` (:attr:`contrast`): no noise, drift, jitter, charging,
             gain/offset fluctuation or quantisation.
         """
         tips = self._check_tips(tips)
         t = self.time if t is None else float(t)
         y = self._render_yield(tips, t, dtype=np.float64)
-        return self.noise.brightness + self.noise.contrast * y
+        return self.noise.brightness + self.contrast * y
 
     def acquire(self, tips) -> np.ndarray:
         """Scan one noisy frame and advance the clock by one frame period.
@@ -268,7 +275,7 @@ class SimulatedSEM:
         gain = 1.0 + nz.gain_fluctuation * self._gain_state
         offset = nz.offset_fluctuation_gray * self._offset_state
 
-        g_e = nz.contrast / self.dose if self.dose > 0 else 0.0
+        g_e = self.gain_gray_per_electron
         need_noise = nz.shot_noise or nz.read_noise_gray > 0
         if need_noise:
             cv2.setRNGSeed(int(rng.integers(0, 2**31 - 1)))
@@ -298,7 +305,7 @@ class SimulatedSEM:
         else:
             noise = None
         img = y
-        img *= np.float32(nz.contrast * gain)
+        img *= np.float32(self.contrast * gain)
         img += np.float32(nz.brightness + offset)
         if noise is not None:
             img += noise * np.float32(gain)
