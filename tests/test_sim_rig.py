@@ -19,7 +19,7 @@ def _rig(**kw):
 
 
 def test_commands_take_effect_from_the_next_frame():
-    rig = _rig(piezo=PiezoParameters(creep_per_decade=0.0))
+    rig = _rig(piezo=PiezoParameters(creep_per_decade=0.0, position_noise_nm=0.0))
     rig.microscope.grab()
     x0 = rig.truth.loc[0, "x"]
     frame_before = rig.microscope.grab()
@@ -38,7 +38,7 @@ def test_commands_take_effect_from_the_next_frame():
 
 
 def test_displacement_follows_view_rotation_and_pixel_size():
-    rig = _rig(piezo=PiezoParameters(creep_per_decade=0.0, hysteresis=False))
+    rig = _rig(piezo=PiezoParameters(creep_per_decade=0.0, hysteresis=False, position_noise_nm=0.0))
     rig.microscope.grab()
     p0 = rig.truth.loc[0, ["x", "y"]].to_numpy(float)
     rig.axis(0, "x").apply(10.0)
@@ -88,7 +88,7 @@ def test_dac_quantisation_of_commands():
 
 
 def test_macro_stepper_quantises_to_100nm_and_moves_the_probe():
-    rig = _rig(piezo=PiezoParameters(creep_per_decade=0.0))
+    rig = _rig(piezo=PiezoParameters(creep_per_decade=0.0, position_noise_nm=0.0))
     rig.microscope.grab()
     p0 = rig.truth.loc[0, ["x", "y"]].to_numpy(float)
     mac = rig.macro(0, "x")
@@ -120,6 +120,18 @@ def test_bad_axis_manipulator_and_commands_raise():
             ax.apply(bad)
     with pytest.raises(ValueError, match="n_manipulators"):
         SimulatedRig(n_manipulators=5)
+
+
+def test_position_noise_is_in_the_truth():
+    rig = _rig(piezo=PiezoParameters(creep_per_decade=0.0, position_noise_nm=3.3))
+    xs = []
+    for _ in range(200):
+        rig.microscope.grab()
+        xs.append(rig.truth.loc[0, ["x", "y"]].to_numpy(float))
+    # x and y piezo noise of 3.3 nm each, rotated into the image, plus z's 5 deg projection
+    sd = np.std(np.array(xs), axis=0) * 66.0
+    assert np.hypot(*sd) == pytest.approx(3.3 * math.sqrt(2 + math.sin(math.radians(5)) ** 2),
+                                          rel=0.15)
 
 
 def test_truth_log_and_columns():

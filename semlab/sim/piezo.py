@@ -234,16 +234,23 @@ class PiezoParameters:
         Creep reference time.
     hysteresis : bool
         ``False`` replaces the Preisach model by the line ``y = v``.
+    position_noise_nm : float
+        Standard deviation of the piezo's position noise (amplifier noise, vibration),
+        drawn independently per frame and axis; 1 nm rms ~ the 5 nm peak-to-peak
+        "nominal resolution" of the Zyvex nano stage. It is part of the ground truth.
     """
 
     lag_s: float = 0.002
     creep_per_decade: float = 0.015
     creep_t0_s: float = 0.1
     hysteresis: bool = True
+    position_noise_nm: float = 1.0
 
     def __post_init__(self):
         if self.lag_s < 0 or self.creep_per_decade < 0 or self.creep_t0_s <= 0:
             raise ValueError("PiezoParameters: lag_s, creep_per_decade >= 0 and creep_t0_s > 0")
+        if not (math.isfinite(self.position_noise_nm) and self.position_noise_nm >= 0):
+            raise ValueError("PiezoParameters: position_noise_nm must be finite and >= 0")
 
 
 class PiezoAxis:

@@ -116,6 +116,10 @@ class SimulatedRig:
                                 beam_sigma_px=beam_sigma_px)
         self.pixel_size_nm = self.sem.pixel_size_nm
         params = PiezoParameters() if piezo is None else piezo
+        if not isinstance(params, PiezoParameters):
+            raise TypeError(f"piezo must be a PiezoParameters, got {type(piezo).__name__}")
+        self.piezo = params
+        self._rng = np.random.default_rng([seed, 3])
         self._manipulators = [Manipulator(m, params, lambda i, a: default_hysteresis(i, a, seed))
                               for m in range(n)]
         self.microscope = SimulatedMicroscope(self)
@@ -145,8 +149,12 @@ class SimulatedRig:
     def _tips_nominal(self, t: float) -> np.ndarray:
         """Tip positions (px) without image drift at time ``t`` (advances the piezos)."""
         tips = np.empty((self.n_manipulators, 2))
+        sd = self.piezo.position_noise_nm
         for m, man in enumerate(self._manipulators):
             d = man.displacement_nm(t)
+            if sd > 0:
+                for a in AXES:
+                    d[a] += sd * self._rng.standard_normal()
             th = math.radians(self.view_angles_deg[m])
             c, s = math.cos(th), math.sin(th)
             px = self.pixel_size_nm
