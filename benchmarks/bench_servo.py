@@ -46,8 +46,9 @@ TARGET = {"frames_0p5px": 6, "overshoot_px": 0.5, "final_std_px": 0.2}
 class TruthTracker:
     """Reference 'tracker' that reads the simulator's ground truth (benchmark only)."""
 
-    def __init__(self, rig, probe=0):
-        self.rig, self.probe = rig, probe
+    def __init__(self, rig, probe=0, noise_px=0.0, seed=0):
+        self.rig, self.probe, self.noise = rig, probe, noise_px
+        self.rng = np.random.default_rng(seed)
 
     def _tip(self):
         t = self.rig.truth
@@ -59,21 +60,23 @@ class TruthTracker:
         self.c0, self.ref = np.array([x + (w - 1) / 2, y + (h - 1) / 2]), self._tip()
 
     def update(self, frame):
-        p = self.c0 + self._tip() - self.ref
+        p = self.c0 + self._tip() - self.ref + self.rng.normal(0.0, self.noise, 2)
         return (float(p[0]), float(p[1]), 1.0, True)
 
 
 class Bench:
-    def __init__(self, seed: int, tracker: str):
+    def __init__(self, seed: int, tracker: str, oracle_noise: float = 0.0):
         self.rig = SimulatedRig(seed=seed)
+        self.oracle_noise, self._n_trackers = oracle_noise, 0
         self.mic = self.rig.microscope
         self.axis = self.rig.axis(0, "x")
         self.tracker_kind = tracker
-        self.frames = 0
+        self.models = {}
 
     def tracker(self):
         if self.tracker_kind == "oracle":
-            return TruthTracker(self.rig)
+            self._n_trackers += 1
+            return TruthTracker(self.rig, noise_px=self.oracle_noise, seed=self._n_trackers)
         from semlab.tracking import Tracker
 
         return Tracker()
@@ -91,15 +94,29 @@ class Bench:
         ry = round(y - (ROI_SIZE - 1) / 2)
         return (min(max(rx, 0), 640 - ROI_SIZE), min(max(ry, 0), 480 - ROI_SIZE), ROI_SIZE, ROI_SIZE)
 
-    def drive(self, model, path, dwell=10, max_dv=2.0):
-        """Move the axis along a voltage path in small increments (the tracker follows), then dwell."""
+    def drive(self, path, dwell=10, max_dv=2.0):
+        """Move the axis along a voltage path in small increments (the tracker follows), then dwell;
+        every fitted model (shadow of the axis) sees the commands."""
         tr = self.tracker()
         tr.init(self.mic.grab(), self.roi())
         for u in path:
-            n = max(1, int(np.ceil(abs(u - model.state.u) / max_dv)))
-            drive_voltages(self.mic, self.axis, tr, np.linspace(model.state.u, u, n + 1)[1:], model=model)
+            u_now = self.axis.command
+            n = max(1, int(np.ceil(abs(u - u_now) / max_dv)))
+            volts = np.linspace(u_now, u, n + 1)[1:]
+            drive_voltages(self.mic, self.axis, tr, volts)
+            self.sync(volts)
         for _ in range(dwell):
             self.mic.grab()
+
+    def sync(self, volts, skip=None):
+        """Tell the models (but ``skip``) about commands sent to the axis."""
+        for m in self.models.values():
+            if m is not skip:
+                m.forward(np.clip(volts, *m.u_range))
+
+    def sync_after(self, resp, used):
+        """After a servo run with model ``used``: replay its commands into the other models."""
+        self.sync(np.r_[resp["u"].to_numpy()[1:], self.axis.command], skip=used)
 
 
 def true_displacement(rig, direction, frames):
@@ -118,6 +135,7 @@ def section_characterisation(b: Bench):
     char = characterise_hysteresis(b.mic, b.axis, b.roi(), u_min=U_MIN, u_max=U_MAX, n_steps=30,
                                    tracker=b.tracker(), progress=False)
     models = {k: fit_hysteresis(char, kind=k) for k in ("linear", "polynomial", "pi")}
+    b.models = models
     # tracker error during the characterisation (ground truth of the same frames)
     first = int(b.rig.frame_index) - int(char["frame"].iloc[-1]) - 1
     frames = (char["frame"].to_numpy() + first).astype(int)
@@ -150,7 +168,7 @@ def open_loop_errors(b: Bench, model, *, creep=None, n_major=15, n_small=20, see
     rng = np.random.default_rng(seed)
     lo, hi = model.displacement_range
     # start from U0 after a descent (the model's reset state) in small increments
-    b.drive(model, [U_MAX, U_MIN], dwell=15)
+    b.drive([U_MAX, U_MIN], dwell=15)
     d = model.direction
     b.mic.grab()
     p_ref, y_ref = b.tip() @ np.asarray(d), model.state.y
@@ -158,7 +176,7 @@ def open_loop_errors(b: Bench, model, *, creep=None, n_major=15, n_small=20, see
     def command(target):
         u = model.inverse(target)
         b.axis.apply(u)
-        model.forward(u)
+        b.sync([u])
         b.mic.grab()
         return b.tip() @ np.asarray(d) - p_ref + y_ref
 
@@ -214,11 +232,12 @@ def starting_paths(model, n, rng):
 
 
 def run_step(b: Bench, model, path, step, *, feedforward, **params):
-    b.drive(model, path)
+    b.drive(path)
     roi = b.roi()
     f0 = b.rig.frame_index
     resp = step_response(b.mic, b.axis, roi, step, model=model, feedforward=feedforward,
                          n_frames=60, tracker=b.tracker(), **params)
+    b.sync_after(resp, model)
     truth = true_displacement(b.rig, resp.attrs["direction"], resp["frame"].to_numpy() + f0)
     resp["true_displacement"] = truth - truth[0]
     m = step_metrics(resp)
@@ -302,10 +321,35 @@ def section_steps(b: Bench, model, creep, n_rep, seed=2):
     return df
 
 
+def section_variants(b: Bench, models, creep, n_rep, seed=2):
+    """The same kind of steps with other feed-forward choices: which part of the result comes from what."""
+    starts = starting_paths(models["polynomial"], n_rep, np.random.default_rng(seed))
+    variants = {
+        "polynomial + creep comp. (default)": ("polynomial", {"creep": creep, "ki_fine": 0.25}),
+        "polynomial, no creep comp.": ("polynomial", {"ki_fine": 0.25}),
+        "polynomial, no creep comp., fixed ki": ("polynomial", {}),
+        "PI + creep comp.": ("pi", {"creep": creep, "ki_fine": 0.25}),
+    }
+    rows = []
+    for name, (kind, params) in variants.items():
+        model = models[kind]
+        ms = [run_step(b, model, path, step, feedforward=True, **params)[1] for path, step in starts]
+        df = pd.DataFrame(ms)
+        rows.append({"feed-forward": name, "mean |residual after FF| px": df.residual_after_ff_px.abs().mean(),
+                     "worst frames to +-0.5 px": df.response_frames_0p5px.max(),
+                     "worst overshoot px": df.overshoot_px.max(), "worst final std px": df.final_std_px.max(),
+                     "mean |true final error| px": df.true_final_error_px.abs().mean(),
+                     "pass": int(((df.response_frames_0p5px <= TARGET["frames_0p5px"])
+                                  & (df.overshoot_px <= TARGET["overshoot_px"])
+                                  & (df.final_std_px <= TARGET["final_std_px"])).sum())})
+    print(f"\n## 3b. Feed-forward variants on {n_rep} other steps (does creep compensation pay? PI vs polynomial?)")
+    print(pd.DataFrame(rows).set_index("feed-forward").round(3).to_string())
+
+
 def section_ab(b: Bench, model, creep, n=5, frames=25):
     from semlab.control import VisualServo
 
-    b.drive(model, [U_MIN + 0.15 * (U_MAX - U_MIN)])
+    b.drive([U_MIN + 0.15 * (U_MAX - U_MIN)])
     roi = b.roi()
     f0 = b.rig.frame_index
     servo = VisualServo(b.mic, b.axis, model, tracker=b.tracker(), creep=creep, ki_fine=0.25).start(roi)
@@ -316,6 +360,7 @@ def section_ab(b: Bench, model, creep, n=5, frames=25):
             if target:
                 ends.append(len(servo.rows) - 1)
     df = servo.to_frame()
+    b.sync_after(df, model)
     truth = true_displacement(b.rig, df.attrs["direction"], df["frame"].to_numpy() + f0)
     df["true_displacement"] = truth - truth[0]
     at_b = df.iloc[ends]
@@ -329,7 +374,7 @@ def section_ab(b: Bench, model, creep, n=5, frames=25):
 
 
 def section_macro(b: Bench, model):
-    b.drive(model, [U_MIN + 0.5 * (U_MAX - U_MIN)])
+    b.drive([U_MIN + 0.5 * (U_MAX - U_MIN)])
     lo, hi = model.displacement_range
     dist = 330.0
     roi = b.roi()
@@ -337,6 +382,7 @@ def section_macro(b: Bench, model):
     p0 = b.tip()
     resp = move_to(b.mic, b.axis, roi, dist, model=model, macro=b.rig.macro(0, "x"),
                    pixel_size_nm=b.rig.pixel_size_nm, n_frames=25, tracker=b.tracker())
+    b.sync_after(resp, model)
     moved = (b.tip() - p0) @ np.asarray(model.direction)
     n_macro = int((resp["stage"] == "macro").sum())
     print(f"\n## 5. Macro/nano hand-over: a {dist:g}-px move (piezo sub-range reach {hi - lo:.0f} px): "
@@ -349,20 +395,24 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--tracker", choices=("default", "oracle"), default="default")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--oracle-noise", type=float, default=0.0, help="px of white noise added to the oracle")
     ap.add_argument("--model", choices=("polynomial", "pi"), default="polynomial")
     args = ap.parse_args(argv)
     t_start = time.time()
-    b = Bench(args.seed, args.tracker)
+    b = Bench(args.seed, args.tracker, args.oracle_noise)
     print(f"# bench_servo: simulated rig seed {args.seed}, 640x480 @ 13 Hz, {b.rig.pixel_size_nm:g} nm/px, "
-          f"tracker: {args.tracker}, fast mode: {FAST}")
+          f"tracker: {args.tracker}{f' + {args.oracle_noise} px noise' if args.oracle_noise else ''}, "
+          f"fast mode: {FAST}")
     _, models = section_characterisation(b)
     section_open_loop(b, models)
     model = models[args.model]
-    b.drive(model, [U_MIN + 0.3 * (U_MAX - U_MIN)], dwell=20)
-    creep, _ = characterise_creep(b.mic, b.axis, b.roi(), model=model, step_px=STEP_PX, n_frames=40,
-                                  tracker=b.tracker())
+    b.drive([U_MIN + 0.3 * (U_MAX - U_MIN)], dwell=20)
+    creep, hold = characterise_creep(b.mic, b.axis, b.roi(), model=model, step_px=STEP_PX, n_frames=40,
+                                     tracker=b.tracker())
+    b.sync_after(hold.assign(u=hold["u"]), model)
     print(f"\ncreep fitted from a 100-px hold: {creep}  (simulated: log law 1.5 %/decade, t0 0.1 s)")
     section_steps(b, model, creep, n_rep=4 if FAST else 10)
+    section_variants(b, models, creep, n_rep=2 if FAST else 5)
     section_ab(b, model, creep, n=3 if FAST else 5)
     section_macro(b, model)
     print(f"\n{b.rig.frame_index} frames simulated, {time.time() - t_start:.0f} s")

@@ -439,3 +439,51 @@ def test_servo_keeps_the_model_in_step_with_the_axis(hysteretic):
         assert model.state.u == rig.axis.command
     df = servo.to_frame()
     assert abs(df["displacement"].iloc[-1] - 80.0) < 0.5
+
+
+# ---------------------------------------------------------------------------------------------
+# integration: the simulated rig and the real tracker (the only tests that use them)
+# ---------------------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def sim_rig():
+    pytest.importorskip("semlab.tracking")
+    from semlab.sim import SimulatedRig
+
+    rig = SimulatedRig(seed=3)
+    rig.microscope.grab()
+    return rig
+
+
+def _tip_roi(rig, size=200):
+    rig.microscope.grab()
+    t = rig.truth
+    x, y = t[t.probe == 0][["x", "y"]].iloc[0]
+    rx = min(max(round(x - (size - 1) / 2), 0), 640 - size)
+    ry = min(max(round(y - (size - 1) / 2), 0), 480 - size)
+    return (rx, ry, size, size), np.array([x, y])
+
+
+def test_rig_characterisation_and_feedforward_step_with_the_tracker(sim_rig):
+    rig = sim_rig
+    axis = rig.axis(0, "x")
+    roi, _ = _tip_roi(rig)
+    char = characterise_hysteresis(rig.microscope, axis, roi, u_min=0.0, u_max=40.0, n_steps=16)
+    # the axis moves the probe along the manipulator's x, 2 deg from the image x axis
+    d = char.attrs["direction"]
+    assert math.degrees(math.atan2(d[1], d[0])) == pytest.approx(2.0, abs=0.5)
+    assert char["ok"].mean() > 0.95
+    model = fit_hysteresis(char, kind="pi")
+    # a 60 px step from mid-range: the truth must end within half a pixel of it
+    for u in np.linspace(0.0, 15.0, 6)[1:]:
+        axis.apply(u)
+        model.forward(u)
+        rig.microscope.grab()
+    roi, p0 = _tip_roi(rig)
+    resp = step_response(rig.microscope, axis, roi, 60.0, model=model, n_frames=25)
+    t = rig.truth
+    p1 = t[t.probe == 0][["x", "y"]].iloc[0].to_numpy(float)
+    assert (p1 - p0) @ np.asarray(d) == pytest.approx(60.0, abs=0.5)
+    assert resp["ok"].all()
+    assert abs(step_metrics(resp, final_frames=10)["final_error_px"]) < 0.3
