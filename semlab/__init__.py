@@ -1,3 +1,60 @@
-"""semlab: sub-pixel visual tracking and visual servoing in a scanning electron microscope."""
+"""semlab: sub-pixel visual tracking and visual servoing in a scanning electron microscope.
+
+The handful of calls a notebook or a script needs, after Ru et al. (2012),
+"An Improved Visual Tracking Method in Scanning Electron Microscope":
+
+- tracking: :func:`track`, :class:`Tracker`, :func:`roi_from_click`, :func:`roi_from_motion`,
+  :func:`identify_contour_template`, :func:`adaptive_canny_thresholds`
+- control: :func:`characterise_hysteresis`, :func:`fit_hysteresis`, :func:`step_response`,
+  :func:`step_metrics`
+- data: :func:`read_frames`, :func:`read_image`
+- the simulated rig lives in :mod:`semlab.sim`, the hardware protocols in :mod:`semlab.protocols`.
+
+Names are imported lazily, so ``import semlab`` stays fast and a notebook pays only for what it uses.
+"""
+
+from __future__ import annotations
+
+import importlib
 
 __version__ = "0.1.0"
+
+# public name -> module that defines it
+_EXPORTS = {
+    # tracking (paper: template identification, matching, sub-pixel refinement)
+    "track": "semlab.tracking",
+    "Tracker": "semlab.tracking",
+    "roi_from_click": "semlab.roi",
+    "roi_from_motion": "semlab.roi",
+    "identify_contour_template": "semlab.template",
+    "adaptive_canny_thresholds": "semlab.edges",
+    # hysteresis and visual servo
+    "characterise_hysteresis": "semlab.hysteresis",
+    "fit_hysteresis": "semlab.hysteresis",
+    "step_response": "semlab.control",
+    "step_metrics": "semlab.control",
+    "PID": "semlab.control",
+    "VisualServo": "semlab.control",
+    # data in and out
+    "read_frames": "semlab.io",
+    "read_image": "semlab.io",
+    # protocols
+    "Microscope": "semlab.protocols",
+    "Axis": "semlab.protocols",
+}
+
+__all__ = sorted(_EXPORTS) + ["__version__"]
+
+
+def __getattr__(name: str):
+    try:
+        module = _EXPORTS[name]
+    except KeyError:
+        raise AttributeError(f"module 'semlab' has no attribute {name!r}") from None
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return __all__
