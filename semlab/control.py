@@ -246,11 +246,15 @@ class VisualServo:
         gain drops to ``ki_fine`` so the loop averages the tracker noise instead of chasing it.
     fine_band_px : float
         See ``ki_fine``.
+    ff_margin : float
+        The feed-forward aims short of the target by this fraction of the move (default 1.5 %, about the
+        open-loop error of the models): the probe then approaches from one side and a model error cannot
+        turn into an overshoot; the PID starts from that offset and closes the gap.
     """
 
     def __init__(self, microscope, axis, model, *, tracker=None, feedforward: bool = True, pid=None,
                  max_slew_v: float | None = None, max_step_px: float | None = None, creep=None,
-                 ki_fine: float | None = None, fine_band_px: float = 1.0):
+                 ki_fine: float | None = None, fine_band_px: float = 1.0, ff_margin: float = 0.015):
         if model is None:
             raise ValueError("a hysteresis model is required (it supplies at least direction and gain)")
         model.check_axis(axis)
@@ -262,6 +266,9 @@ class VisualServo:
         if ki_fine is not None and not (math.isfinite(ki_fine) and ki_fine > 0):
             raise ValueError(f"ki_fine={ki_fine} must be a positive number")
         self.ki_fine, self.fine_band_px = ki_fine, float(fine_band_px)
+        if not 0.0 <= ff_margin < 0.5:
+            raise ValueError(f"ff_margin={ff_margin} must be in [0, 0.5)")
+        self.ff_margin = float(ff_margin)
         if creep is not None and not callable(getattr(creep, "predict", None)):
             raise TypeError("creep must be a CreepModel (predict/record/reset)")
         self.creep = creep if feedforward else None  # without feed-forward nothing to compensate
@@ -363,7 +370,9 @@ class VisualServo:
         goal_model = self.model.state.y + (target - self.y_meas)
         u_ref = self.u
         pid = self.pid
-        pid.reset(0.0)
+        # approach from one side: the feed-forward stops short by ff_margin of the move
+        short = self.ff_margin * (goal_model - self.model.state.y) if self.feedforward else 0.0
+        pid.reset(-short)
         pid.ki = self._ki_coarse
         if self.feedforward:
             lo, hi = self.model.displacement_range
@@ -376,10 +385,11 @@ class VisualServo:
         # the first command is sent right after the latest frame (no frame is wasted); from then on
         # one command per frame, each acting from the next frame
         state = {"ff_pos": self.model.state.y, "calm": 0}
+        ff_goal = goal_model - short
 
         def act():
-            if self.feedforward and state["ff_pos"] != goal_model:
-                state["ff_pos"] = self._ff_step(state["ff_pos"], goal_model)
+            if self.feedforward and state["ff_pos"] != ff_goal:
+                state["ff_pos"] = self._ff_step(state["ff_pos"], ff_goal)
                 return
             e = target - self.y_meas
             state["calm"] = state["calm"] + 1 if abs(e) < self.fine_band_px else 0
@@ -401,6 +411,7 @@ class VisualServo:
                 continue
             self._record(x, y, True, target=target, stage=stage, held=False)
             act()
+        pid.ki = self._ki_coarse
 
     def _creep_at(self, frames: float, extra=None) -> float:
         if self.creep is None:
@@ -502,7 +513,7 @@ def step_response(microscope, axis, roi, step_px, *, model, feedforward=True, n_
         Rows in the result (frame 0 is the frame the ROI refers to).
     **params
         ``tracker``, ``pid`` (a :class:`PID`), ``max_slew_v``, ``max_step_px``, ``creep``, ``ki_fine``,
-        ``fine_band_px`` -- see :class:`VisualServo`.
+        ``fine_band_px``, ``ff_margin`` -- see :class:`VisualServo`.
 
     Returns
     -------
@@ -524,7 +535,7 @@ def step_response(microscope, axis, roi, step_px, *, model, feedforward=True, n_
     n_frames = int(n_frames)
     if n_frames < 2:
         raise ValueError("n_frames must be >= 2")
-    allowed = {"tracker", "pid", "max_slew_v", "max_step_px", "creep", "ki_fine", "fine_band_px"}
+    allowed = {"tracker", "pid", "max_slew_v", "max_step_px", "creep", "ki_fine", "fine_band_px", "ff_margin"}
     unknown = set(params) - allowed
     if unknown:
         raise TypeError(f"step_response got unknown parameter(s) {sorted(unknown)}; allowed: {sorted(allowed)}")

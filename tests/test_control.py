@@ -239,7 +239,7 @@ def test_step_response_contract_and_one_frame_latency():
     go_to_state(rig, model, np.linspace(0, 30, 7))
     u_before = rig.u
     resp = step_response(rig.microscope, rig.axis, ROI, 100.0, model=model, n_frames=20,
-                         tracker=FakeTracker(rig))
+                         tracker=FakeTracker(rig), ff_margin=0.0)
     assert list(resp.columns[:8]) == ["frame", "t", "u", "x", "y", "displacement", "target", "ok"]
     assert len(resp) == 20 and resp["frame"].tolist() == list(range(20))
     np.testing.assert_allclose(resp["t"], np.arange(20) * FRAME_PERIOD)
@@ -251,6 +251,13 @@ def test_step_response_contract_and_one_frame_latency():
     assert resp["displacement"].iloc[1] == pytest.approx(100.0, abs=0.05)
     m = step_metrics(resp)
     assert m["response_frames_0p5px"] == 1 and m["overshoot_px"] < 0.05
+    # by default the feed-forward stops 1.5 % short and the PID closes the gap from that side
+    go_to_state(rig, model, [30.0])
+    resp = step_response(rig.microscope, rig.axis, ROI, 100.0, model=model, n_frames=20,
+                         tracker=FakeTracker(rig))
+    assert resp["displacement"].iloc[1] == pytest.approx(98.5, abs=0.05)
+    assert resp["displacement"].max() <= 100.0 + 1e-6
+    assert step_metrics(resp)["response_frames_0p5px"] <= 3
 
 
 def test_step_direction_follows_rising_voltage(hysteretic):
@@ -301,7 +308,7 @@ def test_creep_compensation_removes_the_creep_lag():
             rig.grab()
         rig.creep_steps.clear()  # only the step's own creep (the model knows nothing older)
         return step_metrics(step_response(rig.microscope, rig.axis, ROI, 100.0, model=model, n_frames=30,
-                                          pid=PID(ki=0.3), tracker=FakeTracker(rig), **kw))
+                                          pid=PID(ki=0.3), tracker=FakeTracker(rig), ff_margin=0.0, **kw))
 
     plain, comp = step(), step(creep=CreepModel(0.02, 0.1))
     # without compensation the probe runs ahead of the target by the creep growth and the integrator
