@@ -216,15 +216,16 @@ def section_open_loop(b: Bench, models):
 
 def starting_paths(model, n, rng):
     """Voltage paths that put the axis at different points of the loop, each leaving room for a
-    100-px step in the chosen direction."""
+    100-px step in the chosen direction. Each path starts at U0, which wipes out the memory, so the
+    state it reaches does not depend on what ran before (the same start for every controller)."""
     lo, hi = model.displacement_range
     out = []
     for i in range(n):
         sign = 1.0 if i % 3 != 2 else -1.0  # two up-steps for each down-step
         while True:
             k = int(rng.integers(1, 4))
-            path = list(rng.uniform(U_MIN, U_MAX, k))
-            y = model.predict(path, reset=False)[-1]
+            path = [U_MIN, *rng.uniform(U_MIN, U_MAX, k)]
+            y = model.predict(path, reset=True)[-1]
             if lo + 5 < y + sign * STEP_PX < hi - 5:
                 out.append((path, sign * STEP_PX))
                 break
@@ -275,7 +276,7 @@ def section_steps(b: Bench, model, creep, n_rep, seed=2):
     for i, (path, step) in enumerate(starts):
         _, m_ff = run_step(b, model, path, step, feedforward=True, **ff_params)
         _, m_pid = run_step(b, model, path, step, feedforward=False, pid=PID(ki=ki_best or 0.3))
-        rows.append({"rep": i, "start_V": " > ".join(f"{u:.1f}" for u in path), "step_px": step,
+        rows.append({"rep": i, "start_V": " > ".join(f"{u:.1f}" for u in path[1:]), "step_px": step,
                      **{f"ff_{k}": v for k, v in m_ff.items()}, **{f"pid_{k}": v for k, v in m_pid.items()}})
     df = pd.DataFrame(rows).set_index("rep")
     df["PASS"] = ((df["ff_response_frames_0p5px"] <= TARGET["frames_0p5px"])
