@@ -528,6 +528,11 @@ def step_response(microscope, axis, roi, step_px, *, model, feedforward=True, n_
     ValueError
         NaN step, a step outside the model's reach, a model fitted on another axis, or a tracker that
         reports a NaN position as valid.
+
+    Examples
+    --------
+    >>> resp = step_response(rig.microscope, axis, roi, 100.0, model=model)   # doctest: +SKIP
+    >>> step_metrics(resp)[["response_time_0p5px_s", "overshoot_px", "final_std_px"]]  # doctest: +SKIP
     """
     step_px = float(step_px)
     if not math.isfinite(step_px):

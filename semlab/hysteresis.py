@@ -799,6 +799,15 @@ def fit_hysteresis(characterisation: pd.DataFrame, kind: str = "polynomial", *, 
     TypeError, ValueError
         Not a DataFrame; empty; unknown branch labels; a branch swept both ways (non-monotonic);
         too few valid points for the fit; a probe that did not move or moved against the voltage.
+
+    Examples
+    --------
+    >>> from semlab.sim import SimulatedRig
+    >>> rig = SimulatedRig()
+    >>> char = characterise_hysteresis(rig.microscope, rig.axis(0, "x"), (50, 150, 200, 200),
+    ...                                u_min=0.0, u_max=50.0)          # doctest: +SKIP
+    >>> model = fit_hysteresis(char, kind="pi")                         # doctest: +SKIP
+    >>> u = model.inverse(model.state.y + 100.0)   # feed-forward for a 100-px move  # doctest: +SKIP
     """
     char = _validated_characterisation(characterisation)
     if kind not in ("polynomial", "pi", "linear"):
