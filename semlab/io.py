@@ -525,7 +525,7 @@ def _read_raster(p: Path) -> tuple[np.ndarray, dict]:
     if kind == "PNG":
         if not raw.startswith(b"\x89PNG\r\n\x1a\n"):
             raise FrameReadError(p, "not a PNG file (bad signature)")
-        if b"IEND" not in raw[-32:]:
+        if b"IEND" not in raw[-4096:]:
             raise FrameReadError(p, "truncated or corrupt PNG (no IEND chunk at the end)")
     elif kind == "JPEG":
         if not raw.startswith(b"\xff\xd8"):

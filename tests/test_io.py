@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import cv2
@@ -405,3 +406,29 @@ def test_synthetic_samples_load_with_truth():
     x, y, w, h = seq.roi
     assert 0 <= x and 0 <= y and x + w <= seq.frames.shape[2] and y + h <= seq.frames.shape[1]
     assert seq.pixel_size_nm is not None and seq.pixel_size_nm > 0
+
+
+def test_synthetic_samples_regenerate_bit_identically():
+    """data/make_synthetic.py reproduces the stored frames exactly (else: rerun the script)."""
+    import hashlib
+    import importlib.util
+
+    script = REPO / "data" / "make_synthetic.py"
+    meta_file = REPO / "data" / "synthetic" / "synthetic_static.json"
+    if not (script.exists() and meta_file.exists()):
+        pytest.skip("synthetic samples not present")
+    spec = importlib.util.spec_from_file_location("make_synthetic", script)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    files = module.render("synthetic_static")
+    stored = json.loads(meta_file.read_text())
+    fresh = json.loads(files["synthetic_static.json"])
+    assert fresh["frames_sha256"] == stored["frames_sha256"], (
+        "the simulator changed: run `python data/make_synthetic.py` and commit data/synthetic/"
+    )
+    seq = load_sample("synthetic_static")
+    assert hashlib.sha256(seq.frames.tobytes()).hexdigest() == stored["frames_sha256"]
+    assert (
+        files["synthetic_static_truth.csv"]
+        == (meta_file.with_name("synthetic_static_truth.csv")).read_bytes()
+    )
