@@ -7,7 +7,7 @@ The handful of calls a notebook or a script needs, after Ru et al. (2012),
   :func:`identify_contour_template`, :func:`adaptive_canny_thresholds`
 - control: :func:`characterise_hysteresis`, :func:`fit_hysteresis`, :func:`step_response`,
   :func:`step_metrics`
-- data: :func:`read_frames`, :func:`read_image`
+- data: :func:`read_frames`, :func:`read_image`, :func:`load_sample` (the samples in ``data/``)
 - the simulated rig lives in :mod:`semlab.sim`, the hardware protocols in :mod:`semlab.protocols`.
 
 Names are imported lazily, so ``import semlab`` stays fast and a notebook pays only for what it uses.
@@ -38,6 +38,11 @@ _EXPORTS = {
     # data in and out
     "read_frames": "semlab.io",
     "read_image": "semlab.io",
+    "FrameSequence": "semlab.io",
+    "FrameReadError": "semlab.io",
+    "load_sample": "semlab.io",
+    "list_samples": "semlab.io",
+    "data_path": "semlab.io",
     # protocols
     "Microscope": "semlab.protocols",
     "Axis": "semlab.protocols",
