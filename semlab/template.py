@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from .frames import as_gray_float
+from .roi import as_gray_float
 
 __all__ = ["ContourTemplate", "identify_contour_template", "to_uint8"]
 

@@ -28,7 +28,7 @@ import numpy as np
 import pandas as pd
 
 from .edges import canny_edges
-from .frames import as_gray_float, check_roi, clip_window, roi_centre
+from .roi import as_gray_float, check_roi, clip_window, roi_centre
 from .matching import contour_match, parabola_peak, ssd_match
 from .subpixel import (
     five_point_gradients,
