@@ -41,10 +41,19 @@ __all__ = [
 RESPONSE_COLUMNS = ("frame", "t", "u", "x", "y", "displacement", "target", "ok")
 
 
-def _default_tracker(tracker):
+def _default_tracker(tracker, *, jump_px: float | None = None, roi=None):
+    """The given tracker, or ``semlab.tracking.Tracker()``; when the caller is about to make the probe
+    jump by ``jump_px`` in one frame (feed-forward), the default tracker's search window is widened so
+    that the jump stays inside it (the paper's 300x300 window around a 200x200 ROI allows +-50 px)."""
     if tracker is None:
         from semlab.tracking import Tracker
 
+        if jump_px is not None and roi is not None:
+            side = max(float(roi[2]), float(roi[3])) + 2.0 * math.ceil(1.1 * abs(jump_px) + 20.0)
+            try:
+                return Tracker(search_size=int(max(300, side)))
+            except TypeError:  # a tracker without a search window
+                return Tracker()
         return Tracker()
     if not (callable(getattr(tracker, "init", None)) and callable(getattr(tracker, "update", None))):
         raise TypeError(f"tracker must have init(frame, roi) and update(frame); got {type(tracker).__name__}")
@@ -233,7 +242,9 @@ class VisualServo:
     feedforward : bool
         Use the model's inverse (True) or only its direction and mean gain (False).
     pid : PID, optional
-        Default: ``PID()`` (with feed-forward) or ``PID(ki=0.45)`` (without).
+        Default: ``PID(ki=0.8)`` with feed-forward (the model linearises the plant, so the integrator can
+        remove 80 % of the residual per frame) or ``PID(ki=0.45)`` without (the plant's gain varies
+        around the loop; tuned on the simulated rig, see ``benchmarks/bench_servo.py``).
     max_slew_v : float, optional
         Largest change of the command per frame (V).
     max_step_px : float, optional
@@ -241,9 +252,10 @@ class VisualServo:
     creep : CreepModel, optional
         With feed-forward: subtract the creep predicted for the next frame from the feed-forward goal
         (the steps commanded during this run are recorded in it; it is reset at construction).
-    ki_fine : float, optional
+    ki_fine : float or None
         Gain scheduling: once the error has been within ``fine_band_px`` for two frames, the integral
-        gain drops to ``ki_fine`` so the loop averages the tracker noise instead of chasing it.
+        gain drops to ``ki_fine`` (default 0.25; None: never) so the loop averages the tracker noise
+        instead of feeding it back to the probe.
     fine_band_px : float
         See ``ki_fine``.
     ff_margin : float
@@ -254,14 +266,14 @@ class VisualServo:
 
     def __init__(self, microscope, axis, model, *, tracker=None, feedforward: bool = True, pid=None,
                  max_slew_v: float | None = None, max_step_px: float | None = None, creep=None,
-                 ki_fine: float | None = None, fine_band_px: float = 1.0, ff_margin: float = 0.015):
+                 ki_fine: float | None = 0.25, fine_band_px: float = 0.5, ff_margin: float = 0.015):
         if model is None:
             raise ValueError("a hysteresis model is required (it supplies at least direction and gain)")
         model.check_axis(axis)
         self.microscope, self.axis, self.model = microscope, axis, model
         self.tracker = _default_tracker(tracker)
         self.feedforward = bool(feedforward)
-        self.pid = pid if pid is not None else (PID() if feedforward else PID(ki=0.45))
+        self.pid = pid if pid is not None else (PID(ki=0.8) if feedforward else PID(ki=0.45))
         self._ki_coarse = self.pid.ki
         if ki_fine is not None and not (math.isfinite(ki_fine) and ki_fine > 0):
             raise ValueError(f"ki_fine={ki_fine} must be a positive number")
@@ -544,6 +556,9 @@ def step_response(microscope, axis, roi, step_px, *, model, feedforward=True, n_
     unknown = set(params) - allowed
     if unknown:
         raise TypeError(f"step_response got unknown parameter(s) {sorted(unknown)}; allowed: {sorted(allowed)}")
+    if params.get("tracker") is None:
+        jump = abs(step_px) if params.get("max_step_px") is None else min(abs(step_px), params["max_step_px"])
+        params["tracker"] = _default_tracker(None, jump_px=jump, roi=roi)
     servo = VisualServo(microscope, axis, model, feedforward=feedforward, **params)
     # refuse an unreachable step before anything moves
     r_lo, r_hi = servo.reachable()
