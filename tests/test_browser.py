@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import secrets
 import shutil
 import signal
@@ -97,8 +98,11 @@ class Lab:
             f"--ServerApp.root_dir={root}",
             "--ServerApp.terminals_enabled=False",
             "--LabApp.check_for_updates_class=jupyterlab.NeverCheckForUpdate",
+            # window.jupyterapp lets the test read the kernel's real status (as JupyterLab's own
+            # Galata tests do); cells are still run through the menu, as a user would.
+            "--LabApp.expose_app_in_browser=True",
         ]
-        self._log = open(self.log_path, "w")
+        self._log = open(self.log_path, "w")  # noqa: SIM115 - open for the server's lifetime
         self.proc = subprocess.Popen(cmd, env=env, cwd=root, stdout=self._log,
                                      stderr=subprocess.STDOUT, start_new_session=True)
 
@@ -154,10 +158,11 @@ def lab(tmp_path_factory):
 # --- browser helpers --------------------------------------------------------------------------
 
 JS_KERNEL_IDLE = """() => {
-  const ind = document.querySelector('.jp-NotebookPanel:not(.lm-mod-hidden) .jp-Notebook-ExecutionIndicator');
-  if (ind && ind.getAttribute('data-status')) return ind.getAttribute('data-status') === 'idle';
-  const bar = document.querySelector('#jp-main-statusbar');
-  return !!bar && /\\bIdle\\b/.test(bar.textContent);
+  const app = window.jupyterapp;
+  const widget = app && app.shell && app.shell.currentWidget;
+  const ctx = widget && widget.sessionContext;
+  const kernel = ctx && ctx.session && ctx.session.kernel;
+  return !!kernel && kernel.status === 'idle' && kernel.connectionStatus === 'connected';
 }"""
 
 JS_ALL_EXECUTED = """() => {
@@ -172,12 +177,23 @@ JS_TRACEBACKS = """() => [...document.querySelectorAll('.jp-OutputArea-output')]
 
 
 def _dismiss_dialogs(page) -> None:
-    """Accept a kernel-selection dialog if one pops up (it should not: the notebook names python3)."""
+    """Accept a kernel-selection dialog if one pops up (the notebook names python3, the default)."""
     dialog = page.locator(".jp-Dialog")
     if dialog.count() and dialog.first.is_visible():
         accept = dialog.locator(".jp-mod-accept")
         if accept.count():
             accept.first.click()
+
+
+def _wait_kernel_idle(page, timeout_s: float) -> None:
+    """Wait until the notebook's kernel is connected and idle, accepting any kernel dialog."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        _dismiss_dialogs(page)
+        if page.evaluate(JS_KERNEL_IDLE):
+            return
+        page.wait_for_timeout(500)
+    raise TimeoutError(f"the kernel did not become idle within {timeout_s:.0f} s")
 
 
 def _run_all_cells(page) -> None:
@@ -187,15 +203,20 @@ def _run_all_cells(page) -> None:
 
 def run_notebook_and_move_slider(page, lab: Lab, notebook: str, shots: Path) -> tuple[str, str]:
     """Open ``notebook``, run it, press the threshold slider's arrow keys; return readouts before/after."""
+    from playwright.sync_api import TimeoutError as PlaywrightTimeout
+
     page.goto(lab.url(notebook), wait_until="domcontentloaded", timeout=60_000)
     page.wait_for_selector(".jp-NotebookPanel .jp-Notebook .jp-Cell", timeout=60_000)
-    _dismiss_dialogs(page)
-    page.wait_for_function(JS_KERNEL_IDLE, timeout=60_000)
+    _wait_kernel_idle(page, 90)
 
     _run_all_cells(page)
     # Running all cells first marks them [*]; done means every prompt numbered and the kernel idle.
-    page.wait_for_function(f"() => ({JS_ALL_EXECUTED})() && ({JS_KERNEL_IDLE})()",
-                           timeout=150_000, polling=500)
+    deadline = time.monotonic() + 150
+    while not page.evaluate(f"() => ({JS_ALL_EXECUTED})() && ({JS_KERNEL_IDLE})()"):
+        if time.monotonic() > deadline:
+            raise TimeoutError("the notebook did not finish running within 150 s")
+        _dismiss_dialogs(page)
+        page.wait_for_timeout(500)
     tracebacks = page.evaluate(JS_TRACEBACKS)
     assert not tracebacks, f"{notebook} raised in the browser:\n" + "\n---\n".join(tracebacks)
 
@@ -217,7 +238,7 @@ def run_notebook_and_move_slider(page, lab: Lab, notebook: str, shots: Path) -> 
         page.wait_for_function(
             "([sel, old]) => { const e = document.querySelector(sel); return e && e.innerText !== old; }",
             arg=[f".{READOUT_CLASS}", before], timeout=30_000, polling=250)
-    except Exception:
+    except PlaywrightTimeout:
         # Fall back to typing into the slider's editable readout.
         box = slider.locator(".widget-readout").first
         value = float(box.inner_text())
@@ -234,6 +255,11 @@ def run_notebook_and_move_slider(page, lab: Lab, notebook: str, shots: Path) -> 
     slider.locator("xpath=ancestor::div[contains(@class,'jp-OutputArea-output')][1]").first.screenshot(
         path=str(shots / "widget.png"))
     return before, after
+
+
+def _contour_area(readout: str) -> float | None:
+    m = re.search(r"contour area\s+([\d.]+)\s*px", readout)
+    return float(m.group(1)) if m else None
 
 
 @pytest.mark.timeout(300)
@@ -255,5 +281,9 @@ def test_template_explorer_slider_moves_the_readout(lab):
                 raise
         finally:
             browser.close()
-    assert before.strip(), "the readout was empty before the slider moved"
-    assert after != before, f"moving the threshold slider left the readout unchanged: {before!r}"
+    area_before, area_after = _contour_area(before), _contour_area(after)
+    assert area_before is not None, f"no contour area in the readout before the slider moved: {before!r}"
+    assert "manual" in after, f"the threshold did not switch to manual: {after!r}"
+    # A brighter threshold on a bright probe leaves fewer pixels above it: the area must shrink.
+    assert area_after is not None and area_after < area_before, (
+        f"moving the threshold slider up did not shrink the contour area: {before!r} -> {after!r}")

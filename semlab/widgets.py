@@ -1,0 +1,657 @@
+"""Live widgets for the workbench: thin ipywidgets shells over plain semlab functions.
+
+* :class:`TemplateExplorer` -- pick the ROI (a click point and a size, or motion differencing), tune the
+  contour-template identification (Gaussian σ, Otsu or manual threshold, morphology) and the Canny edge
+  detector (adaptive, eq. 10, or manual T_l/T_h); shows the ROI, the binary image with the contour and the
+  edge map live (the paper's Figs. 1-3). ``explorer.params`` goes straight into :func:`semlab.track`.
+* :class:`TrackingPlayer` -- a frame slider and a Play button over a tracked sequence, with the contour
+  template drawn where the tracker put it and the track so far (the paper's Fig. 7).
+* :class:`ServoPanel` -- step size, feed-forward on/off, PID gains and a Run button for
+  :func:`semlab.step_response`, with the response plot and :func:`semlab.step_metrics` (Fig. 9).
+
+Each widget recomputes through a plain function (:func:`explore_template`, :func:`player_state`,
+:func:`semlab.control.step_response`) and keeps the last answer as an attribute (``.result``,
+``.shown``, ``.response``/``.metrics``) so tests can read it without a browser. Figures are rendered
+off-screen by matplotlib's Agg canvas into an :class:`ipywidgets.Image`, so the widgets need no
+interactive matplotlib backend. Display a widget by leaving it last in a cell or with ``display(w)``.
+"""
+
+from __future__ import annotations
+
+import html
+import time
+
+import numpy as np
+
+from .edges import adaptive_canny_thresholds, canny_edges
+from .frames import as_gray_float, check_roi, roi_centre
+from .plots import figure_png, plot_step_response, plot_track_xy, show_edges, show_frame
+from .roi import roi_from_click, roi_from_motion
+from .template import identify_contour_template, to_uint8
+
+__all__ = ["ServoPanel", "TemplateExplorer", "TrackingPlayer", "explore_template", "player_state"]
+
+#: CSS classes put on the widgets (``add_class``), for the browser test and for styling.
+THRESHOLD_CLASS = "semlab-threshold"
+READOUT_CLASS = "semlab-readout"
+
+_SLIDER_STYLE = {"description_width": "150px"}
+
+
+def _layout(width="460px"):
+    import ipywidgets as w
+
+    return w.Layout(width=width)
+
+
+def _png_figure(nrows, ncols, size, **adjust):
+    """A matplotlib Figure outside pyplot (never shown twice by the inline backend).
+
+    Fixed margins instead of constrained layout: the layout solver doubles the render time.
+    """
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=size)
+    fig.subplots_adjust(**{"left": 0.06, "right": 0.98, "bottom": 0.13, "top": 0.9, "wspace": 0.3, **adjust})
+    return fig.subplots(nrows, ncols, squeeze=False)
+
+
+# ---------------------------------------------------------------------------------------------
+# Template explorer
+# ---------------------------------------------------------------------------------------------
+
+def explore_template(frame, roi, *, sigma=2.0, threshold=None, morph_kernel=3, morph_iterations=1,
+                     canny_sigma=1.0, canny_low=None, canny_high=None) -> dict:
+    """Everything the template explorer shows for one set of parameters.
+
+    Runs :func:`semlab.template.identify_contour_template` on the ROI (paper, Fig. 2) and
+    :func:`semlab.edges.canny_edges` on it (Fig. 3; adaptive thresholds by eq. 10 unless both
+    ``canny_low`` and ``canny_high`` are given). A threshold that leaves no contour is not an error
+    here: the answer says ``ok=False`` with the reason.
+
+    Parameters
+    ----------
+    frame : (M, N) array_like
+    roi : (x, y, w, h)
+    sigma, threshold, morph_kernel, morph_iterations
+        As :func:`semlab.template.identify_contour_template` (``threshold=None``: Otsu).
+    canny_sigma, canny_low, canny_high
+        As :func:`semlab.edges.canny_edges`.
+
+    Returns
+    -------
+    dict
+        ``roi``, ``patch`` (uint8 ROI), ``template`` (ContourTemplate or None), ``ok``, ``error``,
+        ``threshold`` (the one used, gray levels), ``otsu`` (bool), ``area_px`` (px², NaN without a
+        contour), ``length_px`` (contour pixels), ``edges`` (bool ROI edge map), ``canny`` (T_l, T_h),
+        ``adaptive`` (bool), ``n_edges`` (edge pixels).
+    """
+    image = as_gray_float(frame)
+    x, y, w, h = check_roi(roi, image.shape)
+    raw = np.asarray(frame)[y:y + h, x:x + w]
+    patch = to_uint8(raw)
+    out = {"roi": (x, y, w, h), "patch": patch, "template": None, "ok": False, "error": "",
+           "threshold": float("nan"), "otsu": threshold is None, "area_px": float("nan"), "length_px": 0}
+    try:
+        t = identify_contour_template(patch, sigma=sigma, threshold=threshold, morph_kernel=morph_kernel,
+                                      morph_iterations=morph_iterations)
+    except ValueError as err:
+        out["error"] = str(err)
+        if threshold is not None:
+            out["threshold"] = float(threshold)
+    else:
+        out.update(template=t, ok=True, threshold=t.threshold, area_px=t.area, length_px=t.length)
+    adaptive = canny_low is None or canny_high is None
+    thresholds = (adaptive_canny_thresholds(patch, sigma=canny_sigma) if adaptive
+                  else (float(canny_low), float(canny_high)))
+    edges = canny_edges(patch, low=thresholds[0], high=thresholds[1], sigma=canny_sigma)
+    out.update(edges=edges, canny=tuple(float(v) for v in thresholds), adaptive=adaptive,
+               n_edges=int(edges.sum()))
+    return out
+
+
+def _readout_html(r, pixel_size_nm):
+    s = pixel_size_nm
+    parts = [f"<b>ROI</b> {r['roi']}"]
+    th = f"{r['threshold']:.0f}" if np.isfinite(r["threshold"]) else "?"
+    parts.append(f"<b>threshold</b> {th} ({'Otsu' if r['otsu'] else 'manual'})")
+    if r["ok"]:
+        area = f"<b>contour area</b> {r['area_px']:.0f} px²"
+        length = f"<b>length</b> {r['length_px']} px"
+        if s:
+            area += f" ({r['area_px'] * s * s / 1e6:.3g} µm²)"
+            length += f" ({r['length_px'] * s / 1e3:.3g} µm)"
+        parts += [area, length]
+    else:
+        parts.append(f"<b>no contour</b>: {html.escape(r['error'])}")
+    lo, hi = r["canny"]
+    parts.append(f"<b>Canny</b> T_l {lo:.0f} / T_h {hi:.0f} ({'adaptive, eq. 10' if r['adaptive'] else 'manual'})"
+                 f", {r['n_edges']} edge px")
+    return "<div>" + " · ".join(parts) + "</div>"
+
+
+def render_template_figure(frame, r, *, pixel_size_nm=None, size=(14, 3.9)):
+    """The explorer's figure: frame + ROI, ROI + contour, binary + contour, edge map. Returns a Figure."""
+    axes = _png_figure(1, 4, size)[0]
+    x, y = r["roi"][:2]
+    contour = r["template"].points if r["ok"] else None
+    show_frame(frame, axes[0], roi=r["roi"], contour=contour, contour_offset=(x, y),
+               title="(a) frame and ROI")
+    show_frame(r["patch"], axes[1], contour=contour, contour_offset=(x, y), origin=(x, y), title="(b) ROI, contour template")
+    binary = r["template"].morphed if r["ok"] else np.zeros_like(r["patch"])
+    show_frame(binary, axes[2], contour=contour, contour_offset=(x, y), origin=(x, y), title="(d, e) threshold, morphology")
+    show_edges(r["edges"], axes[3], origin=(x, y), title="adaptive Canny" if r["adaptive"] else "fixed Canny")
+    return axes[0].figure
+
+
+class TemplateExplorer:
+    """Pick the ROI and tune the contour template and Canny edges live (paper, Figs. 1-3).
+
+    Parameters
+    ----------
+    frame : (M, N) array_like
+        The frame to take the template from.
+    roi : (x, y, w, h), optional
+        Initial ROI; default: ``roi_size`` around ``click`` (or the frame centre).
+    click : (x, y), optional
+        Initial click point near the probe tip, px (the paper's first ROI method).
+    roi_size : int
+        Side of the ROI a click makes (paper: 200 px at 3,000×).
+    pixel_size_nm : float, optional
+        Adds nm to the readout and the ROI axes.
+    motion_frames : sequence of 2-D arrays, optional
+        Frames of the probe stepping along x or y; enables the "ROI from motion" button (the paper's
+        second ROI method, :func:`semlab.roi.roi_from_motion`).
+    **params
+        Initial ``sigma, threshold, morph_kernel, morph_iterations, canny_sigma, canny_low, canny_high``
+        (as :func:`explore_template`).
+
+    Attributes
+    ----------
+    result : dict
+        The last :func:`explore_template` answer.
+    params : dict
+        The current parameters, ready for ``semlab.track(frames, explorer.roi, method="contour",
+        **explorer.params)``.
+    roi : (x, y, w, h)
+        The current ROI.
+    controls : dict of ipywidgets
+        ``click_x, click_y, roi_size, motion, sigma, otsu, threshold, morph_kernel, morph_iterations,
+        adaptive, canny_sigma, canny`` -- set their ``.value`` to drive the explorer from code.
+    image, readout, ui : ipywidgets
+        The rendered figure (PNG), the text readout and the whole panel.
+    """
+
+    def __init__(self, frame, roi=None, *, click=None, roi_size=200, pixel_size_nm=None, motion_frames=None,
+                 sigma=2.0, threshold=None, morph_kernel=3, morph_iterations=1, canny_sigma=1.0,
+                 canny_low=None, canny_high=None):
+        import ipywidgets as w
+
+        self.frame = np.asarray(frame)
+        image = as_gray_float(self.frame)
+        rows, cols = image.shape
+        self.pixel_size_nm = pixel_size_nm
+        self.motion_frames = motion_frames
+        if roi is not None:
+            self._roi = check_roi(roi, image.shape)
+            click = roi_centre(self._roi)
+            roi_size = self._roi[2]
+        else:
+            click = ((cols - 1) / 2, (rows - 1) / 2) if click is None else click
+            self._roi = roi_from_click(self.frame, click, size=min(int(roi_size), rows, cols))
+        self._syncing = False
+        self.render_ms = float("nan")
+
+        def slider(cls, desc, value, lo, hi, step, **kw):
+            return cls(value=value, min=lo, max=hi, step=step, description=desc, style=_SLIDER_STYLE,
+                       layout=_layout(), continuous_update=False, **kw)
+
+        c = {}
+        c["click_x"] = slider(w.IntSlider, "click x (px)", round(click[0]), 0, cols - 1, 1)
+        c["click_y"] = slider(w.IntSlider, "click y (px)", round(click[1]), 0, rows - 1, 1)
+        c["roi_size"] = slider(w.IntSlider, "ROI size (px)", int(roi_size), 16, min(rows, cols), 2)
+        c["motion"] = w.Button(description="ROI from motion", disabled=motion_frames is None,
+                               tooltip="background subtraction over frames of the probe stepping")
+        c["sigma"] = slider(w.FloatSlider, "Gaussian σ (px)", float(sigma), 0.0, 8.0, 0.25)
+        c["otsu"] = w.Checkbox(value=threshold is None, description="Otsu threshold (automatic)",
+                               indent=False)
+        c["threshold"] = slider(w.IntSlider, "threshold (gray)", 128 if threshold is None else int(threshold),
+                                0, 255, 1)
+        c["threshold"].add_class(THRESHOLD_CLASS)
+        c["morph_kernel"] = slider(w.IntSlider, "morph. kernel (px)", int(morph_kernel), 1, 15, 2)
+        c["morph_iterations"] = slider(w.IntSlider, "morph. iterations", int(morph_iterations), 0, 5, 1)
+        adaptive = canny_low is None or canny_high is None
+        c["adaptive"] = w.Checkbox(value=adaptive, description="adaptive Canny thresholds (eq. 10)",
+                                   indent=False)
+        c["canny_sigma"] = slider(w.FloatSlider, "Canny σ (px)", float(canny_sigma), 0.0, 5.0, 0.25)
+        c["canny"] = slider(w.FloatRangeSlider, "Canny T_l, T_h",
+                            [20.0, 60.0] if adaptive else [float(canny_low), float(canny_high)],
+                            0.0, 400.0, 1.0, readout_format=".0f")
+        self.controls = c
+
+        self.image = w.Image(format="png", layout=w.Layout(width="100%"))
+        self.readout = w.HTML()
+        self.readout.add_class(READOUT_CLASS)
+        left = w.VBox([w.HTML("<b>ROI</b> (click near the tip)"), c["click_x"], c["click_y"], c["roi_size"],
+                       c["motion"]])
+        middle = w.VBox([w.HTML("<b>Contour template</b>"), c["sigma"], c["otsu"], c["threshold"],
+                         c["morph_kernel"], c["morph_iterations"]])
+        right = w.VBox([w.HTML("<b>Canny edges</b>"), c["adaptive"], c["canny_sigma"], c["canny"]])
+        self.ui = w.VBox([w.HBox([left, middle, right], layout=w.Layout(flex_flow="row wrap")),
+                          self.readout, self.image])
+
+        for name in ("click_x", "click_y", "roi_size"):
+            c[name].observe(self._on_click, "value")
+        for name in ("sigma", "otsu", "morph_kernel", "morph_iterations", "adaptive", "canny_sigma"):
+            c[name].observe(self._on_change, "value")
+        c["threshold"].observe(self._on_threshold, "value")
+        c["canny"].observe(self._on_canny, "value")
+        c["motion"].on_click(self._on_motion)
+        self.update()
+
+    # -------------------------------------------------------------- state
+    @property
+    def roi(self) -> tuple[int, int, int, int]:
+        return self._roi
+
+    @property
+    def params(self) -> dict:
+        c = self.controls
+        lo, hi = c["canny"].value
+        adaptive = c["adaptive"].value
+        return {
+            "sigma": float(c["sigma"].value),
+            "threshold": None if c["otsu"].value else float(c["threshold"].value),
+            "morph_kernel": int(c["morph_kernel"].value),
+            "morph_iterations": int(c["morph_iterations"].value),
+            "canny_sigma": float(c["canny_sigma"].value),
+            "canny_low": None if adaptive else float(lo),
+            "canny_high": None if adaptive else float(hi),
+        }
+
+    # -------------------------------------------------------------- events
+    def _on_change(self, change=None):
+        if not self._syncing:
+            self.update()
+
+    def _on_threshold(self, change):
+        # Dragging the threshold means "manual threshold".
+        if self._syncing:
+            return
+        with self._sync():
+            self.controls["otsu"].value = False
+        self.update()
+
+    def _on_canny(self, change):
+        if self._syncing:
+            return
+        with self._sync():
+            self.controls["adaptive"].value = False
+        self.update()
+
+    def _on_click(self, change):
+        if self._syncing:
+            return
+        c = self.controls
+        self._roi = roi_from_click(self.frame, (c["click_x"].value, c["click_y"].value),
+                                   size=int(c["roi_size"].value))
+        self.update()
+
+    def _on_motion(self, button=None):
+        c = self.controls
+        self._roi = roi_from_motion(self.motion_frames, size=int(c["roi_size"].value))
+        cx, cy = roi_centre(self._roi)
+        with self._sync():
+            c["click_x"].value, c["click_y"].value = round(cx), round(cy)
+        self.update()
+
+    class _Sync:
+        def __init__(self, owner):
+            self.owner = owner
+
+        def __enter__(self):
+            self.previous = self.owner._syncing
+            self.owner._syncing = True
+
+        def __exit__(self, *exc):
+            self.owner._syncing = self.previous
+
+    def _sync(self):
+        return self._Sync(self)
+
+    # -------------------------------------------------------------- compute + show
+    def update(self) -> dict:
+        """Recompute with the current controls, refresh the figure and the readout; return ``result``."""
+        self.result = explore_template(self.frame, self._roi, **self.params)
+        c = self.controls
+        # Show what the automatic choices picked, without turning them into manual ones.
+        with self._sync():
+            if c["otsu"].value and np.isfinite(self.result["threshold"]):
+                c["threshold"].value = round(self.result["threshold"])
+            if c["adaptive"].value:
+                lo, hi = self.result["canny"]
+                top = max(c["canny"].max, hi)
+                c["canny"].max = float(np.ceil(top))
+                c["canny"].value = [float(round(lo)), float(round(hi))]
+        self.readout.value = _readout_html(self.result, self.pixel_size_nm)
+        t0 = time.perf_counter()
+        fig = render_template_figure(self.frame, self.result, pixel_size_nm=self.pixel_size_nm)
+        self.image.value = figure_png(fig)
+        self.render_ms = 1e3 * (time.perf_counter() - t0)
+        return self.result
+
+    def _repr_mimebundle_(self, **kwargs):
+        return self.ui._repr_mimebundle_(**kwargs)
+
+
+# ---------------------------------------------------------------------------------------------
+# Tracking player
+# ---------------------------------------------------------------------------------------------
+
+def player_state(tracks, frame, truth=None) -> dict:
+    """The tracked (and true) position at ``frame``, and the displacement error there.
+
+    The error follows the team's convention:
+    ``(x_track - x_track[0]) - (x_true - x_true[0])`` (and y), NaN when the tracker lost the target.
+
+    Parameters
+    ----------
+    tracks : DataFrame
+        ``frame, x, y`` (and ``score``, ``ok``), from :func:`semlab.track`.
+    frame : int
+    truth : DataFrame, optional
+        ``frame, x, y`` of the true tip.
+
+    Returns
+    -------
+    dict
+        ``frame, x, y, score, ok`` and with a truth ``x_true, y_true, err_x, err_y``.
+    """
+    t = tracks.set_index("frame")
+    if frame not in t.index:
+        raise ValueError(f"frame {frame} is not in the track (frames {t.index.min()}..{t.index.max()})")
+    row = t.loc[frame]
+    ok = bool(row["ok"]) if "ok" in t else True
+    out = {"frame": int(frame), "x": float(row["x"]), "y": float(row["y"]),
+           "score": float(row["score"]) if "score" in t else float("nan"), "ok": ok}
+    if truth is not None:
+        g = truth.set_index("frame")
+        first = t.index.min()
+        xt, yt = float(g.loc[frame, "x"]), float(g.loc[frame, "y"])
+        out.update(x_true=xt, y_true=yt)
+        if ok:
+            out["err_x"] = (out["x"] - float(t.loc[first, "x"])) - (xt - float(g.loc[first, "x"]))
+            out["err_y"] = (out["y"] - float(t.loc[first, "y"])) - (yt - float(g.loc[first, "y"]))
+        else:
+            out["err_x"] = out["err_y"] = float("nan")
+    return out
+
+
+class TrackingPlayer:
+    """Step or play through a tracked sequence (paper, Fig. 7).
+
+    Parameters
+    ----------
+    frames : (N, H, W) array_like or sequence of 2-D arrays
+    tracks : DataFrame
+        ``frame, x, y, score, ok`` from :func:`semlab.track` (one target).
+    truth : DataFrame, optional
+        ``frame, x, y`` of the true tip (simulation): drawn as a cyan ``+`` and a dashed path, and the
+        displacement error is shown.
+    roi : (x, y, w, h), optional
+        The ROI the track started from; its box follows the tracked position.
+    template : ContourTemplate, optional
+        Its contour is drawn where the tracker put it; default: identified in ``roi`` of frame 0 with
+        ``template_params`` (:func:`semlab.template.identify_contour_template`).
+    template_params : dict, optional
+    pixel_size_nm : float, optional
+        Shown in the readout (error in nm).
+    interval_ms : int
+        Play speed (ms per frame).
+
+    Attributes
+    ----------
+    shown : dict
+        :func:`player_state` of the frame on screen.
+    controls : dict of ipywidgets
+        ``frame`` (IntSlider) and ``play`` (Play, linked to it in the browser).
+    image, readout, ui : ipywidgets
+    """
+
+    def __init__(self, frames, tracks, truth=None, *, roi=None, template=None, template_params=None,
+                 pixel_size_nm=None, interval_ms=200):
+        import ipywidgets as w
+
+        self.frames = frames
+        if "target" in tracks and tracks["target"].nunique() > 1:
+            raise ValueError("tracks holds several targets; pass one, e.g. tracks[tracks.target == 0]")
+        self.tracks = tracks.reset_index(drop=True)
+        self.truth = truth
+        self.pixel_size_nm = pixel_size_nm
+        self.roi = None if roi is None else tuple(int(v) for v in roi)
+        if template is None and self.roi is not None:
+            x, y, w_, h = self.roi
+            try:
+                template = identify_contour_template(np.asarray(frames[0])[y:y + h, x:x + w_],
+                                                     **(template_params or {}))
+            except ValueError:
+                template = None
+        self.template = template
+        f0, f1 = int(self.tracks["frame"].min()), int(self.tracks["frame"].max())
+        if f1 >= len(frames):
+            raise ValueError(f"the track reaches frame {f1} but there are only {len(frames)} frames")
+        self._first = f0
+        slider = w.IntSlider(value=f0, min=f0, max=f1, step=1, description="frame", style=_SLIDER_STYLE,
+                             layout=_layout("520px"), continuous_update=False)
+        play = w.Play(value=f0, min=f0, max=f1, step=1, interval=int(interval_ms), description="play")
+        w.jslink((play, "value"), (slider, "value"))
+        self.controls = {"frame": slider, "play": play}
+        self.image = w.Image(format="png", layout=w.Layout(width="720px"))
+        self.readout = w.HTML()
+        self.readout.add_class("semlab-player-readout")
+        self.ui = w.VBox([w.HBox([play, slider]), self.readout, self.image])
+        slider.observe(lambda ch: self.show(ch["new"]), "value")
+        self.show(f0)
+
+    def show(self, frame: int) -> dict:
+        """Draw ``frame`` with the contour and the track so far; return :attr:`shown`."""
+        st = player_state(self.tracks, int(frame), self.truth)
+        self.shown = st
+        ax = _png_figure(1, 1, (8, 6), left=0.08, bottom=0.08, top=0.95)[0, 0]
+        kwargs = {}
+        if st["ok"] and self.roi is not None:
+            x0, y0, w_, h = self.roi
+            cx, cy = roi_centre(self.roi)
+            dx, dy = st["x"] - cx, st["y"] - cy
+            kwargs["roi"] = (x0 + dx, y0 + dy, w_, h)
+            if self.template is not None:
+                kwargs["contour"] = self.template.points
+                kwargs["contour_offset"] = (x0 + dx, y0 + dy)
+        if self.truth is not None:
+            kwargs["points"] = [(st["x_true"], st["y_true"])]
+        show_frame(np.asarray(self.frames[st["frame"]]), ax, title=f"frame {st['frame']}", **kwargs)
+        plot_track_xy(self.tracks, ax, upto=st["frame"], truth=self.truth)
+        self.image.value = figure_png(ax.figure)
+        self.readout.value = self._readout(st)
+        return st
+
+    def _readout(self, st):
+        parts = [f"<b>frame</b> {st['frame']}"]
+        if st["ok"]:
+            parts.append(f"<b>x, y</b> {st['x']:.2f}, {st['y']:.2f} px")
+        else:
+            parts.append("<b>lost</b> (ok=False)")
+        if np.isfinite(st["score"]):
+            parts.append(f"<b>score</b> {st['score']:.2f}")
+        if "err_x" in st and np.isfinite(st["err_x"]):
+            e = f"<b>error</b> {st['err_x']:+.2f}, {st['err_y']:+.2f} px"
+            if self.pixel_size_nm:
+                s = self.pixel_size_nm
+                e += f" ({st['err_x'] * s:+.0f}, {st['err_y'] * s:+.0f} nm)"
+            parts.append(e)
+        return "<div>" + " · ".join(parts) + "</div>"
+
+    def _repr_mimebundle_(self, **kwargs):
+        return self.ui._repr_mimebundle_(**kwargs)
+
+
+# ---------------------------------------------------------------------------------------------
+# Servo panel
+# ---------------------------------------------------------------------------------------------
+
+class ServoPanel:
+    """Run visual-servo step responses with and without feed-forward (paper, Figs. 8a and 9).
+
+    Parameters
+    ----------
+    microscope : Microscope
+    axis : Axis
+    roi : (x, y, w, h) or callable
+        The probe's ROI in the current frame, or a function of the microscope returning it (called
+        before every run, since the probe ends each run somewhere else).
+    model : HysteresisModel
+        Fitted on ``axis`` (:func:`semlab.fit_hysteresis`); the panel runs on a copy per run only if
+        ``copy_model=True``, otherwise the model's memory follows the axis, as it must.
+    step_px : float
+        Initial step.
+    n_frames : int
+        Frames per run.
+    pid_factory : callable, optional
+        ``pid_factory(kp, ki, kd) -> PID``; default :class:`semlab.control.PID` with those gains.
+        Leave the gain fields at NaN-free defaults to use the servo's own default PID.
+    pixel_size_nm : float, optional
+    **params
+        More :func:`semlab.step_response` parameters (``max_slew_v``, ``creep``, ...).
+
+    Attributes
+    ----------
+    response : DataFrame or None
+        The last run's :func:`semlab.step_response`.
+    metrics : Series or None
+        Its :func:`semlab.step_metrics`.
+    runs : list of (label, response, metrics)
+        Every run so far (the plot overlays them).
+    controls : dict of ipywidgets
+        ``step_px, feedforward, custom_pid, kp, ki, kd, n_frames, run, clear``.
+    error : str
+        The message of the last run that raised (e.g. a step out of reach), '' otherwise.
+    """
+
+    def __init__(self, microscope, axis, roi, model, *, step_px=100.0, n_frames=40, pid_factory=None,
+                 pixel_size_nm=None, kp=None, ki=None, kd=None, **params):
+        import ipywidgets as w
+
+        self.microscope, self.axis, self.model = microscope, axis, model
+        self._roi = roi
+        self.params = params
+        self.pixel_size_nm = pixel_size_nm
+        self.pid_factory = pid_factory
+        self.response = None
+        self.metrics = None
+        self.runs = []
+        self.error = ""
+        default = self._default_gains()
+        c = {}
+        c["step_px"] = w.FloatSlider(value=float(step_px), min=-200.0, max=200.0, step=1.0,
+                                     description="step (px)", style=_SLIDER_STYLE, layout=_layout(),
+                                     continuous_update=False)
+        c["step_px"].add_class("semlab-step")
+        c["feedforward"] = w.Checkbox(value=True, description="feed-forward (inverse hysteresis model)",
+                                      indent=False)
+        c["custom_pid"] = w.Checkbox(value=kp is not None, description="my PID gains (else the servo's own)",
+                                     indent=False)
+        c["kp"] = w.FloatText(value=default[0] if kp is None else kp, description="K_p",
+                              style=_SLIDER_STYLE, layout=_layout("300px"))
+        c["ki"] = w.FloatText(value=default[1] if ki is None else ki, description="K_i (per frame)",
+                              style=_SLIDER_STYLE, layout=_layout("300px"))
+        c["kd"] = w.FloatText(value=default[2] if kd is None else kd, description="K_d (frames)",
+                              style=_SLIDER_STYLE, layout=_layout("300px"))
+        c["n_frames"] = w.IntSlider(value=int(n_frames), min=5, max=200, step=1, description="frames",
+                                    style=_SLIDER_STYLE, layout=_layout(), continuous_update=False)
+        c["run"] = w.Button(description="Run step", button_style="primary")
+        c["run"].add_class("semlab-run")
+        c["clear"] = w.Button(description="Clear plot")
+        self.controls = c
+        self.image = w.Image(format="png", layout=w.Layout(width="760px"))
+        self.readout = w.HTML("press <b>Run step</b>")
+        self.readout.add_class("semlab-servo-readout")
+        self.ui = w.VBox([
+            w.HBox([w.VBox([c["step_px"], c["n_frames"], c["feedforward"]]),
+                    w.VBox([c["custom_pid"], c["kp"], c["ki"], c["kd"]])]),
+            w.HBox([c["run"], c["clear"]]), self.readout, self.image])
+        c["run"].on_click(lambda b: self.run())
+        c["clear"].on_click(lambda b: self.clear())
+
+    @staticmethod
+    def _default_gains():
+        from .control import PID
+
+        pid = PID()
+        return float(pid.kp), float(pid.ki), float(pid.kd)
+
+    def roi(self):
+        """The ROI for the next run."""
+        return self._roi(self.microscope) if callable(self._roi) else self._roi
+
+    def run(self):
+        """Run one step response with the current controls; return it (None if it raised)."""
+        from .control import PID, step_metrics, step_response
+
+        c = self.controls
+        params = dict(self.params)
+        if c["custom_pid"].value:
+            kp, ki, kd = float(c["kp"].value), float(c["ki"].value), float(c["kd"].value)
+            params["pid"] = self.pid_factory(kp, ki, kd) if self.pid_factory else PID(kp=kp, ki=ki, kd=kd)
+        self.readout.value = "running…"
+        try:
+            resp = step_response(self.microscope, self.axis, self.roi(), float(c["step_px"].value),
+                                 model=self.model, feedforward=bool(c["feedforward"].value),
+                                 n_frames=int(c["n_frames"].value), **params)
+        except (ValueError, TypeError, RuntimeError) as err:
+            self.error = str(err)
+            self.readout.value = f"<b>refused</b>: {html.escape(self.error)}"
+            return None
+        self.error = ""
+        self.response = resp
+        self.metrics = step_metrics(resp, final_frames=min(30, max(2, len(resp) // 3)))
+        label = (f"{'FF+PID' if c['feedforward'].value else 'PID only'}, {c['step_px'].value:+.0f} px"
+                 + (f", K=({c['kp'].value:g}, {c['ki'].value:g}, {c['kd'].value:g})" if c["custom_pid"].value
+                    else ""))
+        self.runs.append((label, resp, self.metrics))
+        self._draw()
+        self.readout.value = self._readout(label, self.metrics)
+        return resp
+
+    def clear(self):
+        self.runs = []
+        self.image.value = b""
+        self.readout.value = "cleared"
+
+    def _readout(self, label, m):
+        def f(key, unit, fmt=".2f"):
+            v = m.get(key, np.nan)
+            return "—" if not np.isfinite(v) else f"{v:{fmt}} {unit}"
+
+        return ("<div>" + " · ".join([
+            f"<b>{html.escape(label)}</b>",
+            f"<b>response time (±1 px)</b> {f('response_time_1px_s', 's')}",
+            f"<b>(±0.5 px)</b> {f('response_time_0p5px_s', 's')}",
+            f"<b>overshoot</b> {f('overshoot_px', 'px')}",
+            f"<b>final</b> {f('final_mean_px', 'px', '.3f')} ± {f('final_std_px', 'px', '.3f')}",
+            f"<b>lost frames</b> {int(m.get('n_lost', 0))}",
+        ]) + "</div>")
+
+    def _draw(self):
+        axes = _png_figure(1, 2, (12, 4), left=0.07, wspace=0.25)[0]
+        for label, resp, _ in self.runs[-6:]:
+            plot_step_response(resp, axes[0], label=label, pixel_size_nm=None)
+            plot_step_response(resp, axes[1], label=label, target=True)
+        axes[0].set_title("step responses (Fig. 9a/b)")
+        last = self.runs[-1][1]
+        tgt = float(last["target"].iloc[-1])
+        axes[1].set_ylim(tgt - 3, tgt + 3)
+        axes[1].set_title("near the target (Fig. 9c)")
+        self.image.value = figure_png(axes[0].figure)
+
+    def _repr_mimebundle_(self, **kwargs):
+        return self.ui._repr_mimebundle_(**kwargs)
