@@ -1,0 +1,218 @@
+"""Widgets without a browser: set the controls' values, press buttons, read ``.result``/``.shown``.
+
+The scenes are synthetic so the expected answers follow from geometry: a bright disc of radius R whose edge
+is blurred by a Gaussian of width s has, at gray level ``b + (a - b) * p``, an iso-contour of radius
+``R - s * Φ⁻¹(p)`` (for R >> s), so the thresholded area shrinks as the threshold rises and equals πR² at the
+midpoint threshold.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy.ndimage import gaussian_filter
+from scipy.stats import norm
+
+from semlab.widgets import TemplateExplorer, TrackingPlayer, explore_template, player_state
+
+BG, FG = 40.0, 200.0      # background and probe gray levels
+R, BLUR = 30.0, 2.0       # disc radius and edge blur, px
+SHAPE = (160, 200)        # rows, cols
+CENTRE = (90.0, 75.0)     # x, y
+
+
+def disc_frame(centre=CENTRE, noise=0.0, seed=0):
+    yy, xx = np.mgrid[: SHAPE[0], : SHAPE[1]]
+    inside = ((xx - centre[0]) ** 2 + (yy - centre[1]) ** 2 <= R**2).astype(float)
+    img = BG + (FG - BG) * gaussian_filter(inside, BLUR)
+    if noise:
+        img = img + np.random.default_rng(seed).normal(0.0, noise, img.shape)
+    return np.clip(img, 0, 255).astype(np.uint8)
+
+
+ROI = (40, 25, 100, 100)   # holds the whole disc, with margin
+
+
+@pytest.fixture
+def explorer():
+    # No smoothing and no morphology: the contour is the iso-contour of the frame itself.
+    return TemplateExplorer(disc_frame(), ROI, sigma=0.0, morph_kernel=1, morph_iterations=0)
+
+
+def expected_area(threshold):
+    p = (threshold - BG) / (FG - BG)
+    r = R - BLUR * norm.ppf(p)
+    return math.pi * r * r
+
+
+def test_manual_threshold_area_follows_the_iso_contour(explorer):
+    # One pixel of boundary position error allowed: contour points sit on pixel centres.
+    for threshold in (80, 120, 160):
+        explorer.controls["threshold"].value = threshold
+        r = explorer.result
+        assert r["ok"] and not r["otsu"]
+        assert explorer.params["threshold"] == threshold
+        band = 2 * math.pi * R * 1.0
+        assert abs(r["area_px"] - expected_area(threshold)) < band, (threshold, r["area_px"])
+
+
+def test_raising_the_threshold_shrinks_the_bright_probe(explorer):
+    areas = []
+    for threshold in (70, 100, 130, 160, 190):
+        explorer.controls["threshold"].value = threshold
+        areas.append(explorer.result["area_px"])
+    assert all(a > b for a, b in itertools.pairwise(areas)), areas
+    assert "manual" in explorer.readout.value
+    assert f"{areas[-1]:.0f} px²" in explorer.readout.value
+
+
+def test_otsu_is_the_default_and_lands_between_the_two_levels(explorer):
+    assert explorer.controls["otsu"].value
+    assert explorer.params["threshold"] is None
+    t = explorer.result["threshold"]
+    assert BG < t < FG
+    # The slider shows Otsu's choice without turning it into a manual threshold.
+    assert explorer.controls["threshold"].value == round(t)
+    assert explorer.controls["otsu"].value
+    # Ticking Otsu again after a manual move restores the automatic threshold.
+    explorer.controls["threshold"].value = 180
+    assert explorer.params["threshold"] == 180
+    explorer.controls["otsu"].value = True
+    assert explorer.params["threshold"] is None
+    assert explorer.result["threshold"] == pytest.approx(t)
+
+
+def test_a_threshold_above_the_probe_is_reported_not_raised(explorer):
+    explorer.controls["threshold"].value = 250
+    r = explorer.result
+    assert not r["ok"] and r["template"] is None and math.isnan(r["area_px"])
+    assert "no contour" in explorer.readout.value
+
+
+def test_larger_canny_sigma_reduces_the_edge_count_on_a_noisy_frame():
+    ex = TemplateExplorer(disc_frame(noise=12.0), ROI, sigma=1.0)
+    counts = []
+    for s in (0.5, 1.5, 3.0):
+        ex.controls["canny_sigma"].value = s
+        counts.append(ex.result["n_edges"])
+    # Smoothing removes noise gradients: fewer spurious edges (the disc's own edge stays, ~2πR px).
+    assert counts[0] > counts[1] > counts[2], counts
+    assert counts[2] > 0.5 * 2 * math.pi * R
+
+
+def test_manual_canny_thresholds_switch_off_the_adaptive_ones(explorer):
+    assert explorer.result["adaptive"] and explorer.params["canny_low"] is None
+    explorer.controls["canny"].value = [5.0, 10.0]
+    assert not explorer.controls["adaptive"].value
+    assert explorer.params["canny_low"] == 5.0 and explorer.params["canny_high"] == 10.0
+    low_count = explorer.result["n_edges"]
+    explorer.controls["canny"].value = [300.0, 390.0]
+    # Higher hysteresis thresholds never add edges.
+    assert explorer.result["n_edges"] <= low_count
+    assert explorer.result["canny"] == (300.0, 390.0)
+
+
+def test_click_moves_the_roi(explorer):
+    explorer.controls["roi_size"].value = 80
+    explorer.controls["click_x"].value = 100
+    explorer.controls["click_y"].value = 70
+    x, y, w, h = explorer.roi
+    assert (w, h) == (80, 80)
+    assert x + (w - 1) / 2 == pytest.approx(100, abs=0.5) and y + (h - 1) / 2 == pytest.approx(70, abs=0.5)
+    assert explorer.result["roi"] == explorer.roi
+
+
+@pytest.mark.xfail(reason="Tracker.init hands identify_contour_template a float32 ROI, which to_uint8 "
+                          "stretches to 0-255, so a manual threshold means another gray level there",
+                   strict=False)
+def test_params_mean_the_same_template_in_the_tracker(explorer):
+    from semlab.tracking import Tracker
+
+    explorer.controls["threshold"].value = 120
+    tracker = Tracker("contour", **explorer.params)
+    assert tracker.init(explorer.frame, explorer.roi).ok
+    assert tracker.contour.area == pytest.approx(explorer.result["area_px"])
+
+
+def test_params_are_accepted_by_the_tracker(explorer):
+    from semlab.tracking import Tracker
+
+    explorer.controls["canny"].value = [20.0, 60.0]
+    tracker = Tracker("contour", **explorer.params)
+    assert tracker.init(explorer.frame, explorer.roi).ok
+    # Otsu is invariant to the gray-level stretch: the same object either way.
+    assert tracker.contour.area == pytest.approx(explorer.result["area_px"], rel=0.03)
+
+
+def test_roi_from_motion_button_finds_the_moving_disc():
+    frames = [disc_frame(centre=(60.0 + 8 * k, 75.0)) for k in range(8)]
+    ex = TemplateExplorer(frames[0], (0, 0, 60, 60), motion_frames=frames, sigma=0.0)
+    ex.controls["roi_size"].value = 100
+    ex.controls["motion"].click()
+    x, y, w, h = ex.roi
+    # The disc sweeps x = 60..116 at y = 75: the ROI holds the middle of that path.
+    assert x <= 88 <= x + w - 1 and y <= 75 <= y + h - 1
+    assert ex.controls["click_x"].value == round(x + (w - 1) / 2)
+
+
+def test_explore_template_matches_the_explorer(explorer):
+    direct = explore_template(explorer.frame, explorer.roi, **explorer.params)
+    assert direct["area_px"] == explorer.result["area_px"]
+    assert direct["n_edges"] == explorer.result["n_edges"]
+
+
+# --------------------------------------------------------------------------------------------
+# Tracking player
+
+def _moving_sequence(n=6, step=(5.0, -2.0)):
+    frames = np.stack([disc_frame(centre=(CENTRE[0] + step[0] * k, CENTRE[1] + step[1] * k)) for k in range(n)])
+    roi_c = (ROI[0] + (ROI[2] - 1) / 2, ROI[1] + (ROI[3] - 1) / 2)
+    truth = pd.DataFrame({"frame": range(n), "x": [CENTRE[0] + step[0] * k for k in range(n)],
+                          "y": [CENTRE[1] + step[1] * k for k in range(n)]})
+    # A track with a known error of +0.3 px in x from frame 1 on, and frame 3 lost.
+    tracks = pd.DataFrame({"frame": range(n),
+                           "x": [roi_c[0] + step[0] * k + (0.3 if k else 0.0) for k in range(n)],
+                           "y": [roi_c[1] + step[1] * k for k in range(n)],
+                           "score": 0.9, "ok": True})
+    tracks.loc[3, ["x", "y"]] = np.nan
+    tracks.loc[3, "ok"] = False
+    return frames, tracks, truth
+
+
+def test_player_slider_shows_that_frames_track_row():
+    frames, tracks, truth = _moving_sequence()
+    player = TrackingPlayer(frames, tracks, truth, roi=ROI, pixel_size_nm=66.0)
+    assert player.shown["frame"] == 0
+    first_png = player.image.value
+    player.controls["frame"].value = 4
+    st = player.shown
+    assert st["frame"] == 4
+    assert (st["x"], st["y"]) == (tracks.loc[4, "x"], tracks.loc[4, "y"])
+    assert st["err_x"] == pytest.approx(0.3) and st["err_y"] == pytest.approx(0.0, abs=1e-12)
+    assert "+0.30, +0.00 px (+20, +0 nm)" in player.readout.value
+    assert player.image.value != first_png
+    assert player.template is not None and player.template.area > 0
+
+
+def test_player_shows_a_lost_frame_as_lost():
+    frames, tracks, truth = _moving_sequence()
+    player = TrackingPlayer(frames, tracks, truth, roi=ROI)
+    player.controls["frame"].value = 3
+    assert not player.shown["ok"] and math.isnan(player.shown["err_x"])
+    assert "lost" in player.readout.value
+
+
+def test_player_state_rejects_frames_outside_the_track():
+    _, tracks, truth = _moving_sequence()
+    with pytest.raises(ValueError, match="frame 99"):
+        player_state(tracks, 99, truth)
+
+
+def test_player_needs_enough_frames():
+    frames, tracks, _ = _moving_sequence()
+    with pytest.raises(ValueError, match="only 3 frames"):
+        TrackingPlayer(frames[:3], tracks)
