@@ -24,9 +24,8 @@ import time
 import numpy as np
 
 from .edges import adaptive_canny_thresholds, canny_edges
-from .frames import as_gray_float, check_roi, roi_centre
 from .plots import figure_png, plot_step_response, plot_track_xy, show_edges, show_frame
-from .roi import roi_from_click, roi_from_motion
+from .roi import as_gray_float, check_roi, clip_window, roi_centre, roi_from_click, roi_from_motion
 from .template import identify_contour_template, to_uint8
 
 __all__ = ["ServoPanel", "TemplateExplorer", "TrackingPlayer", "explore_template", "player_state"]
@@ -507,8 +506,9 @@ class ServoPanel:
     microscope : Microscope
     axis : Axis
     roi : (x, y, w, h) or callable
-        The probe's ROI in the current frame, or a function of the microscope returning it (called
-        before every run, since the probe ends each run somewhere else).
+        The probe's ROI in the current frame. After each run the panel re-centres it on the last tracked
+        position, since the probe ends each run somewhere else. A callable ``roi(microscope)`` is
+        called before every run instead.
     model : HysteresisModel
         Fitted on ``axis`` (:func:`semlab.fit_hysteresis`); the panel runs on a copy per run only if
         ``copy_model=True``, otherwise the model's memory follows the axis, as it must.
@@ -542,7 +542,8 @@ class ServoPanel:
         import ipywidgets as w
 
         self.microscope, self.axis, self.model = microscope, axis, model
-        self._roi = roi
+        self._roi = roi if callable(roi) else tuple(int(v) for v in roi)
+        self._frame_shape = None
         self.params = params
         self.pixel_size_nm = pixel_size_nm
         self.pid_factory = pid_factory
@@ -613,6 +614,7 @@ class ServoPanel:
             return None
         self.error = ""
         self.response = resp
+        self._follow(resp)
         self.metrics = step_metrics(resp, final_frames=min(30, max(2, len(resp) // 3)))
         label = (f"{'FF+PID' if c['feedforward'].value else 'PID only'}, {c['step_px'].value:+.0f} px"
                  + (f", K=({c['kp'].value:g}, {c['ki'].value:g}, {c['kd'].value:g})" if c["custom_pid"].value
@@ -621,6 +623,19 @@ class ServoPanel:
         self._draw()
         self.readout.value = self._readout(label, self.metrics)
         return resp
+
+    def _follow(self, resp):
+        """Re-centre a fixed ROI on the last tracked position (the tracker's ROI centre moved there)."""
+        if callable(self._roi):
+            return
+        ok = resp["ok"].to_numpy(bool) & np.isfinite(resp["x"].to_numpy(float))
+        if not ok.any():
+            return
+        last = resp[ok].iloc[-1]
+        w, h = self._roi[2:]
+        shape = np.shape(self.microscope.grab()) if self._frame_shape is None else self._frame_shape
+        self._frame_shape = shape
+        self._roi = clip_window(float(last["x"]), float(last["y"]), w, h, shape)
 
     def clear(self):
         self.runs = []
