@@ -216,3 +216,59 @@ def test_player_needs_enough_frames():
     frames, tracks, _ = _moving_sequence()
     with pytest.raises(ValueError, match="only 3 frames"):
         TrackingPlayer(frames[:3], tracks)
+
+
+# --------------------------------------------------------------------------------------------
+# Servo panel (simulated rig, the tracker in the loop)
+
+@pytest.fixture(scope="module")
+def servo_rig():
+    from semlab.hysteresis import characterise_hysteresis, fit_hysteresis
+    from semlab.roi import roi_from_click
+    from semlab.sim import SimulatedRig
+
+    rig = SimulatedRig(seed=0)
+    frame = rig.microscope.grab()
+    tip = rig.truth.query("probe == 0")[["x", "y"]].to_numpy()[0]
+    roi = roi_from_click(frame, tip, size=200)
+    axis = rig.axis(0, "x")
+    char = characterise_hysteresis(rig.microscope, axis, roi, u_min=0.0, u_max=50.0, n_steps=8)
+    return rig, axis, roi, fit_hysteresis(char, kind="polynomial")
+
+
+def test_servo_panel_runs_and_feedforward_is_faster(servo_rig):
+    from semlab.widgets import ServoPanel
+
+    rig, axis, roi, model = servo_rig
+    panel = ServoPanel(rig.microscope, axis, roi, model, step_px=50.0, n_frames=20)
+    assert panel.response is None and panel.metrics is None
+    times = {}
+    # From U0 (after the characterisation) up and nearly back, first PID only, then with feed-forward.
+    for ff, step in [(False, 50.0), (False, -45.0), (True, 50.0), (True, -45.0)]:
+        panel.controls["feedforward"].value = ff
+        panel.controls["step_px"].value = step
+        panel.controls["run"].click()
+        assert panel.error == "", panel.error
+        resp = panel.response
+        assert len(resp) == 20 and resp["target"].iloc[-1] == step
+        # The panel followed the probe: the next ROI is centred on the last tracked position.
+        last = resp[resp.ok].iloc[-1]
+        x, y, w, h = panel.roi()
+        assert abs(x + (w - 1) / 2 - last.x) <= 1 and abs(y + (h - 1) / 2 - last.y) <= 1
+        assert abs(panel.metrics["final_mean_px"] - step) < 1.0
+        times[(ff, step)] = panel.metrics["response_frames_1px"]
+    # Feed-forward makes the move in one frame; the PID alone needs several (paper, Fig. 9).
+    assert times[(True, 50.0)] < times[(False, 50.0)], times
+    assert len(panel.runs) == 4 and panel.image.value
+    assert "response time" in panel.readout.value
+
+
+def test_servo_panel_reports_a_step_out_of_reach(servo_rig):
+    from semlab.widgets import ServoPanel
+
+    rig, axis, roi, model = servo_rig
+    panel = ServoPanel(rig.microscope, axis, roi, model, step_px=200.0, n_frames=10)
+    panel.controls["step_px"].value = -200.0   # far below U0's displacement: out of the model's reach
+    assert panel.run() is None
+    assert "reach" in panel.error and "refused" in panel.readout.value
+    assert panel.response is None
