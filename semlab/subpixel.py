@@ -4,7 +4,9 @@
 ``[1, −8, 0, 8, −1]/12`` and the closed-form 2×2 least-squares solve of eq. 9.
 :func:`gauss_newton_translation` goes further: inverse-compositional Gauss–Newton on a set of
 template pixels (the contour band), bicubic interpolation, a gain/offset model against gray-level
-fluctuation and Huber weights against occlusion and clutter.
+fluctuation and Huber weights against occlusion and clutter, on line-whitened images weighted by
+the shot-noise variance (:func:`estimate_noise`, :func:`whiten_lines`), which is what brings it
+close to the Cramér–Rao bound of an SEM frame whose noise is correlated along the scan line.
 """
 
 from __future__ import annotations
@@ -17,11 +19,16 @@ import numpy as np
 __all__ = [
     "FIVE_POINT_KERNEL",
     "GaussNewtonResult",
+    "NoiseModel",
+    "estimate_noise",
     "five_point_gradients",
     "gauss_newton_translation",
     "gradient_subpixel_shift",
     "sample_bicubic",
     "sample_shifted",
+    "sample_shifted_filtered",
+    "weighted_ncc",
+    "whiten_lines",
 ]
 
 #: The paper's derivative mask (eq. 8): truncation error O(h⁴).
@@ -111,6 +118,35 @@ def sample_bicubic(image, xs, ys) -> np.ndarray:
     return out
 
 
+def _keys_taps(frac: float) -> np.ndarray:
+    """Keys' four cubic weights (a = −0.5) for one fractional offset in [0, 1)."""
+    t = float(frac)
+    t2, t3 = t * t, t * t * t
+    return np.array([-0.5 * t3 + t2 - 0.5 * t, 1.5 * t3 - 2.5 * t2 + 1.0,
+                     -1.5 * t3 + 2.0 * t2 + 0.5 * t, 0.5 * t3 - 0.5 * t2], np.float32)
+
+
+def sample_shifted_filtered(image, points, shift) -> np.ndarray:
+    """As :func:`sample_shifted`, by one separable 4×4 Keys filter over the image and a gather.
+
+    Faster than 16 gathers when the points fill a good part of ``image`` (a crop around them).
+    Points whose stencil leaves the image see its border replicated.
+    """
+    img = np.asarray(image, np.float32)
+    fx, fy = np.floor(shift[0]), np.floor(shift[1])
+    wx, wy = _keys_taps(shift[0] - fx), _keys_taps(shift[1] - fy)
+    # out(x, y) = Σᵢⱼ wx[i]·wy[j]·img(x − 1 + i, y − 1 + j): a correlation anchored at tap 1.
+    filtered = cv2.sepFilter2D(img, -1, wx.reshape(1, 4), wy.reshape(4, 1), anchor=(1, 1),
+                               borderType=cv2.BORDER_REPLICATE)
+    rows, cols = img.shape
+    px = points[:, 0].astype(np.intp) + int(fx)
+    py = points[:, 1].astype(np.intp) + int(fy)
+    if px.min() < 0 or py.min() < 0 or px.max() >= cols or py.max() >= rows:
+        px = np.clip(px, 0, cols - 1)
+        py = np.clip(py, 0, rows - 1)
+    return filtered[py, px].astype(np.float64)
+
+
 def sample_shifted(image, points, shift) -> np.ndarray:
     """Bicubic samples of ``image`` at integer ``points`` (K, 2) moved by one real ``shift``.
 
@@ -136,6 +172,107 @@ def sample_shifted(image, points, shift) -> np.ndarray:
     return out
 
 
+
+@dataclass(frozen=True)
+class NoiseModel:
+    """Noise of an SEM frame as the tracker sees it: estimated from the image, never assumed.
+
+    Attributes
+    ----------
+    rho : float
+        Correlation of neighbouring pixels along the scan line (the video amplifier's limited
+        bandwidth: an AR(1) process along x), in [0, 0.95].
+    variance_at_zero, variance_slope : float
+        Pixel noise variance ``a + b · I`` as a function of the gray level ``I`` (read noise plus
+        shot noise, whose variance grows with the signal above the black level, so ``a`` may be
+        negative), before the line correlation.
+    variance_floor : float
+        Smallest variance the model returns (a quarter of the smallest measured one).
+    """
+
+    rho: float = 0.0
+    variance_at_zero: float = 1.0
+    variance_slope: float = 0.0
+    variance_floor: float = 1e-6
+
+    def variance(self, level) -> np.ndarray:
+        """Pixel noise variance at gray level(s) ``level`` (never below ``variance_floor``)."""
+        v = self.variance_at_zero + self.variance_slope * np.asarray(level, np.float64)
+        return np.maximum(v, self.variance_floor)
+
+
+def estimate_noise(image, *, flat_quantile: float = 0.6) -> NoiseModel:
+    """Estimate the line correlation and the signal-dependent variance from ONE image.
+
+    Vertical neighbours ``d = I(x, y) − I(x, y + 1)`` cancel the scene wherever it varies slowly,
+    and each row pair's median is subtracted, which also cancels per-line offsets. What is left is
+    the difference of two independent rows of noise: its lag-1 autocorrelation along x is the
+    line correlation ``ρ``, and ``d²/2`` regressed on the local gray level gives ``a + b·I``.
+    Only "flat" pixels (gradient below the ``flat_quantile`` of the image) are used.
+
+    Parameters
+    ----------
+    image : (M, N) array_like
+        At least 8×8 px.
+    flat_quantile : float
+        Fraction of the pixels, those with the weakest smoothed gradient, that count as flat.
+
+    Returns
+    -------
+    NoiseModel
+    """
+    img = np.asarray(image, np.float32)
+    if img.ndim != 2 or min(img.shape) < 8:
+        raise ValueError(f"need a 2-D image of at least 8x8 px to estimate the noise, got {img.shape}")
+    smooth = cv2.GaussianBlur(img, (0, 0), 2.0)
+    gy, gx = np.gradient(smooth)
+    grad = np.hypot(gx, gy)
+    flat = grad <= np.quantile(grad, flat_quantile)
+    flat = flat[:-1] & flat[1:]
+    d = img[:-1].astype(np.float64) - img[1:]
+    d -= np.median(d, axis=1, keepdims=True)
+    level = 0.5 * (smooth[:-1] + smooth[1:]).astype(np.float64)
+    pairs = flat[:, 1:] & flat[:, :-1]
+    a, b = d[:, 1:][pairs], d[:, :-1][pairs]
+    if a.size < 50:
+        return NoiseModel()
+    rho = float(np.clip(np.mean(a * b) / max(np.sqrt(np.mean(a * a) * np.mean(b * b)), 1e-12), 0.0, 0.95))
+    lv, d2 = level[flat], 0.5 * d[flat] ** 2
+    # Robust straight line through the binned medians (d² is chi-square: median/0.455 = mean).
+    edges = np.quantile(lv, np.linspace(0, 1, 9))
+    xs, ys = [], []
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        sel = (lv >= lo) & (lv <= hi)
+        if sel.sum() >= 20:
+            xs.append(float(np.median(lv[sel])))
+            ys.append(float(np.median(d2[sel])) / 0.4549)
+    if not ys:
+        return NoiseModel(rho=rho)
+    if len(xs) >= 2 and np.ptp(xs) > 1e-6:
+        slope = max(float(np.polyfit(xs, ys, 1)[0]), 0.0)
+    else:
+        slope = 0.0
+    intercept = float(np.mean(ys) - slope * np.mean(xs))
+    floor = max(0.25 * float(np.min(ys)), 1e-6)
+    return NoiseModel(rho=rho, variance_at_zero=intercept, variance_slope=slope, variance_floor=floor)
+
+
+def whiten_lines(image, rho: float) -> np.ndarray:
+    """Undo the scan line's AR(1) correlation: ``w(x) = I(x) − ρ·I(x − 1)`` along every row.
+
+    A translation commutes with this filter, so registering whitened images registers the
+    images, with the noise made white (the weighting the Cramér–Rao bound assumes). The first
+    column keeps ``(1 − ρ)·I`` so that a constant stays a constant.
+    """
+    img = np.asarray(image, np.float32)
+    if rho == 0:
+        return img.copy()
+    out = np.empty_like(img)
+    out[:, 1:] = img[:, 1:] - np.float32(rho) * img[:, :-1]
+    out[:, 0] = (1.0 - rho) * img[:, 0]
+    return out
+
+
 @dataclass
 class GaussNewtonResult:
     """Outcome of :func:`gauss_newton_translation`.
@@ -146,95 +283,182 @@ class GaussNewtonResult:
         Translation ``(dx, dy)`` that maps template coordinates into the image.
     gain, offset : float
         Photometric parameters: ``image ≈ gain · template + offset``.
-    score : float
-        Weighted normalised correlation between the template and the warped image, in [-1, 1].
+    weights : (K,) ndarray
+        Final robust (Huber) weights, 1 for inliers.
     inliers : float
         Fraction of pixels with full Huber weight.
     iterations : int
     converged : bool
-    samples : ndarray
-        The image at the final position (for template averaging).
+    samples : (K,) ndarray
+        The image at the position before the last (sub-tolerance) step.
     """
 
     shift: np.ndarray
     gain: float
     offset: float
-    score: float
+    weights: np.ndarray
     inliers: float
     iterations: int
     converged: bool
     samples: np.ndarray
 
 
-def gauss_newton_translation(image, points, values, gx, gy, shift0, *, gain0=1.0, offset0=0.0,
-                             max_iterations: int = 20, tolerance: float = 1e-3, huber: float | None = 2.0,
-                             photometric: bool = True) -> GaussNewtonResult:
+def _remap_points(image, xs, ys):
+    out = cv2.remap(image, xs.reshape(1, -1), ys.reshape(1, -1), cv2.INTER_CUBIC,
+                    borderMode=cv2.BORDER_REPLICATE)
+    return out.reshape(-1).astype(np.float64)
+
+
+def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=None, gain0=1.0,
+                             offset0=0.0, max_iterations: int = 20, tolerance: float = 2e-3,
+                             huber: float | None = 2.0, photometric: bool = True, regions=None,
+                             exact: bool = True, curvature=None) -> GaussNewtonResult:
     """Inverse-compositional Gauss–Newton for a translation with gain/offset (beyond eq. 9).
 
-    Minimises ``Σ ρ(I(x + p) − g·T(x) − o)`` over the template pixels ``x`` (eq. 2 with a gain
-    and offset), linearising the template, not the image (Hager & Belhumeur 1998; Baker &
-    Matthews 2004), so the steepest-descent images ``[g·T_x, g·T_y, T, 1]`` use the template's
+    Minimises ``Σ wᵢ ρ(I(xᵢ + p) − g·T(xᵢ) − o)`` over the template pixels ``xᵢ`` (eq. 2 with a
+    gain and an offset), linearising the template, not the image (Hager & Belhumeur 1998; Baker &
+    Matthews 2004): the steepest-descent images ``[g·T_x, g·T_y, T, 1]`` use the template's
     gradients — the paper's offline matrix ``M₀`` (eqs. 4-5) extended by two photometric columns.
-    ``ρ`` is Huber's loss on residuals scaled by their robust spread, which lets occluded or
-    cluttered pixels drop out.
+    ``ρ`` is Huber's loss on residuals scaled by their robust spread, so occluded or cluttered
+    pixels drop out; ``wᵢ`` are inverse noise variances.
 
     Parameters
     ----------
     image : (M, N) ndarray of float32
-    points : (K, 2) ndarray of int
-        Template pixel coordinates ``(x, y)`` in the image at zero shift.
+    points : (K, 2) ndarray
+        Template pixel coordinates ``(x, y)`` in ``image`` at zero shift (integers for
+        ``exact=True``).
     values, gx, gy : (K,) ndarray
-        Template gray levels and their 5-point derivatives at those pixels.
+        Template gray levels and their derivatives at those pixels.
     shift0 : (2,) array_like
         Starting translation.
+    weights : (K,) ndarray, optional
+        Inverse noise variances (default: equal).
     gain0, offset0 : float
         Starting photometric parameters.
     max_iterations : int
     tolerance : float
         Stop when the translation update is below this many px.
     huber : float or None
-        Huber threshold in robust standard deviations; ``None`` for plain least squares.
+        Huber threshold in robust standard deviations (the spread is the MAD of the first
+        iteration's residuals); ``None`` for plain least squares.
     photometric : bool
         Estimate gain and offset (True) or hold them at ``gain0``, ``offset0``.
+    regions : (K,) array_like of bool, optional
+        With ``photometric``: take gain and offset from the mean levels of the object pixels
+        (True) and the background pixels (False) while the steps exceed 0.05 px, instead of
+        regressing the image on the template. Means over hundreds of pixels are unbiased even
+        when the template is noisy, whereas the regression's gain shrinks towards 0 when the
+        template's noise is comparable with its contrast (errors in variables; low dose).
+    exact : bool
+        Interpolate with exact Keys cubic weights (a = −0.5, :func:`sample_shifted_filtered`)
+        instead of OpenCV's bicubic ``remap`` (a = −0.75, positions rounded to 1/32 px:
+        faster, but the rounding leaves the iteration cycling between neighbouring cells and a
+        0.01-px floor, and its different kernel biases sharp edges by a few hundredths of a px).
+    curvature : (ndarray, ndarray), optional
+        Gradients ``(I_x, I_y)`` of ``image``. Then the translation block of the normal matrix is
+        ``Σ w J ∇I(x + p)ᵀ`` (at the start) instead of ``Σ w J Jᵀ``: the Newton step of the
+        estimating equation ``Σ w J r = 0``. This lets ``gx, gy`` be a denoised (smoothed)
+        template gradient — lower variance when the template is noisy — without the overshoot
+        that the smaller smoothed gradients would otherwise cause.
 
     Returns
     -------
     GaussNewtonResult
     """
+    img = np.asarray(image, np.float32)
+    pts = np.asarray(points, np.float64)
+    px, py = pts[:, 0].astype(np.float32), pts[:, 1].astype(np.float32)
     p = np.array(shift0, np.float64)
     g, o = float(gain0), float(offset0)
-    t = values.astype(np.float64)
-    tx, ty = gx.astype(np.float64), gy.astype(np.float64)
-    ones = np.ones_like(t)
+    t = np.asarray(values, np.float64)
+    tx, ty = np.asarray(gx, np.float64), np.asarray(gy, np.float64)
+    prior = np.ones_like(t) if weights is None else np.asarray(weights, np.float64)
+    sqrt_prior = np.sqrt(prior)
+    joint = photometric and regions is None
+    two_level = photometric and regions is not None
+    if two_level:
+        inside = np.asarray(regions, bool)
+        n_in = int(inside.sum())
+        if n_in == 0 or n_in == len(inside):
+            raise ValueError("regions must mark both object and background pixels")
+        ind_in = inside / n_in
+        ind_out = ~inside / (len(inside) - n_in)
+        t_in, t_out = float(t @ ind_in), float(t @ ind_out)
+        if t_in == t_out:
+            raise ValueError("the template has no contrast between object and background")
+
+    def sample(shift):
+        if exact:
+            return sample_shifted_filtered(img, pts, shift)
+        return _remap_points(img, px + np.float32(shift[0]), py + np.float32(shift[1]))
+
     converged = False
     step = np.inf
-    weights = ones
+    robust = np.ones_like(t)
+    spread = None
+    block = None
+    prev, damping = None, 1.0
     it = 0
     samples = None
     for it in range(1, max_iterations + 1):
-        samples = sample_shifted(image, points, p)
+        samples = sample(p)
+        if two_level and step > 0.05:
+            # Gain and offset follow the image while the translation still moves a lot, then
+            # stay fixed: the region means depend on the translation, and updating them at
+            # every step couples the two into an oscillation that Gauss–Newton does not model.
+            g = (float(samples @ ind_in) - float(samples @ ind_out)) / (t_in - t_out)
+            o = float(samples @ ind_out) - g * t_out
+            if abs(g) < 1e-6:
+                break
         residual = samples - (g * t + o)
         if huber is not None:
-            spread = 1.4826 * np.median(np.abs(residual - np.median(residual))) + 1e-9
-            a = np.abs(residual) / (huber * spread)
-            weights = np.where(a <= 1.0, 1.0, 1.0 / np.maximum(a, 1e-12))
-        cols = [g * tx, g * ty] + ([t, ones] if photometric else [])
-        jac = np.stack(cols, axis=1)
-        jw = jac * weights[:, None]
-        hess = jw.T @ jac
-        rhs = jw.T @ residual
+            z = residual * sqrt_prior
+            if spread is None:
+                spread = 1.4826 * float(np.median(np.abs(z - np.median(z)))) + 1e-9
+            a = np.abs(z) / (huber * spread)
+            robust = np.minimum(1.0, 1.0 / np.maximum(a, 1e-12))
+        w = prior * robust
+        jx, jy = g * tx, g * ty
+        wjx, wjy = w * jx, w * jy
+        if joint:
+            jac = np.stack([jx, jy, t, np.ones_like(t)], axis=1)
+            jw = jac * w[:, None]
+            hess = jw.T @ jac
+            rhs = jw.T @ residual
+        else:
+            hess = np.array([[wjx @ jx, wjx @ jy], [wjy @ jx, wjy @ jy]])
+            rhs = np.array([wjx @ residual, wjy @ residual])
+        if curvature is not None:
+            if block is None:
+                gix = _remap_points(curvature[0], px + np.float32(p[0]), py + np.float32(p[1]))
+                giy = _remap_points(curvature[1], px + np.float32(p[0]), py + np.float32(p[1]))
+                block = np.array([[wjx @ gix, wjx @ giy], [wjy @ gix, wjy @ giy]])
+                sym = 0.5 * (block + block.T)
+                if not (np.linalg.det(sym) > 0 and np.trace(sym) > 0):
+                    block = False
+            if block is not False:
+                hess[:2, :2] = block
         try:
             delta = np.linalg.solve(hess, rhs)
         except np.linalg.LinAlgError:
             break
+        if not np.all(np.isfinite(delta)):
+            break
+        # A step that reverses a good part of a previous one longer than 0.1 px means the
+        # linearisation overshoots (noisy Jacobian, a far start): halve the steps from then on.
+        d2 = delta[:2]
+        if prev is not None and float(prev @ prev) > 0.01 and float(d2 @ prev) < -0.25 * float(prev @ prev):
+            damping = max(0.5 * damping, 0.125)
+        prev = d2.copy()
         # Inverse composition: the template moved by delta[:2], so the image position moves back.
-        p -= delta[:2]
-        if photometric:
+        p -= damping * d2
+        if joint:
             g += delta[2]
             o += delta[3]
-        if not np.all(np.isfinite(p)) or abs(g) < 1e-6:
+        if abs(g) < 1e-6:
             break
-        step = float(np.hypot(delta[0], delta[1]))
+        step = damping * float(np.hypot(d2[0], d2[1]))
         if step < tolerance:
             converged = True
             break
@@ -242,11 +466,20 @@ def gauss_newton_translation(image, points, values, gx, gy, shift0, *, gain0=1.0
         # Huber re-weighting can make the last digits wander: a step well below a tenth of a
         # pixel after max_iterations still counts as converged.
         converged = step < 10 * tolerance
-    samples = sample_shifted(image, points, p)
-    w = weights / weights.sum()
-    sm, tm = w @ samples, w @ t
-    ds, dt = samples - sm, t - tm
-    denom = np.sqrt((w @ (ds * ds)) * (w @ (dt * dt)))
-    score = float((w @ (ds * dt)) / denom) if denom > 0 else 0.0
-    return GaussNewtonResult(shift=p, gain=g, offset=o, score=score, inliers=float(np.mean(weights >= 1.0)),
-                             iterations=it, converged=converged, samples=samples)
+    return GaussNewtonResult(shift=p, gain=g, offset=o, weights=robust, inliers=float(np.mean(robust >= 1.0)),
+                             iterations=it, converged=converged,
+                             samples=samples if samples is not None else np.full_like(t, np.nan))
+
+
+def weighted_ncc(a, b, weights=None) -> float:
+    """Weighted normalised cross-correlation of two sample vectors, in [-1, 1] (0 if flat)."""
+    a = np.asarray(a, np.float64)
+    b = np.asarray(b, np.float64)
+    w = np.ones_like(a) if weights is None else np.asarray(weights, np.float64)
+    sw = w.sum()
+    if not sw > 0:
+        return 0.0
+    w = w / sw
+    da, db = a - w @ a, b - w @ b
+    den = np.sqrt((w @ (da * da)) * (w @ (db * db)))
+    return float((w @ (da * db)) / den) if den > 0 and np.isfinite(den) else 0.0

@@ -2,21 +2,33 @@
 
 Methods
 -------
-``"contour"``
-    The paper's method: in a 300×300 window around the last position, adaptive-threshold Canny
-    (eq. 10), contour-template match, then one step of the gradient sub-pixel method (eq. 9) on
-    the contour band.
+``"ic"`` (the default of :class:`Tracker`)
+    Beyond the paper, and measured best (``benchmarks/bench_tracking.py``): a coarse masked
+    normalised-correlation search at quarter resolution inside the 300×300 window, then
+    inverse-compositional Gauss–Newton on the contour band (the pixels within ``band_px`` of the
+    contour template, where nearly all the positional information is), bicubic interpolation,
+    gain and offset in the model (gray-level fluctuation, charging), Huber weights (occlusion,
+    clutter), the image whitened along the scan line and weighted by the shot-noise variance
+    (both estimated from the first frame), and a template averaged over the first registered
+    frames (a one-frame template doubles the variance of every estimate).
+``"contour"`` (the default of :func:`track`, as the contract fixes it)
+    The paper's method: in a 300×300 window around the last position, Gaussian smoothing and
+    adaptive-threshold Canny (eq. 10), the contour-template match (score from the template's
+    contour pixels only), then one step of the gradient sub-pixel method (eq. 9) on the contour
+    band.
 ``"ssd"``
-    The conventional baseline: full-template SSD (eq. 2) at integer positions, then eq. 9 on the
-    whole template.
-``"ic"`` (the default)
-    Beyond the paper: a coarse normalised-correlation search at quarter resolution, then
-    inverse-compositional Gauss–Newton on the contour band with bicubic interpolation, gain/offset
-    invariance and Huber weights; the template is the average of the first registered frames
-    (a one-frame template doubles the estimate's variance).
+    The conventional baseline the paper improves on: full-template SSD (eq. 2) at integer
+    positions (``subpixel=True`` adds one step of eq. 9 on the whole template).
+``"hb"``
+    The paper's parametric SSD tracker (eqs. 2-5, Hager & Belhumeur 1998): integer SSD, then the
+    increment ``Δμ = −(M₀ᵀM₀)⁻¹M₀ᵀ[I(f(R; μ), tₙ) − I(R, t₀)]`` with the offline matrix ``M₀``
+    iterated to convergence on the whole template.
 
-A lost target never raises: the row says ``ok=False`` with NaN position, and the next frame is
-searched over the whole image to re-acquire it.
+A lost target (occlusion, the probe leaving the window, contact, an unusable frame) never
+raises: the row says ``ok=False`` with NaN position and a low score, and the next frame is
+searched over the whole image to re-acquire it. Several targets (the rig's four probes) are
+tracked in one pass over the frames by giving :func:`track` a list of ROIs (one independent
+:class:`Tracker` per ROI, a ``target`` column in the result).
 """
 
 from __future__ import annotations
@@ -28,18 +40,25 @@ import numpy as np
 import pandas as pd
 
 from .edges import canny_edges
+from .matching import contour_match, offline_matrix, parabola_peak, ssd_match
 from .roi import as_gray_float, check_roi, clip_window, roi_centre
-from .matching import contour_match, parabola_peak, ssd_match
 from .subpixel import (
+    NoiseModel,
+    estimate_noise,
     five_point_gradients,
     gauss_newton_translation,
     gradient_subpixel_shift,
+    sample_shifted_filtered,
+    weighted_ncc,
+    whiten_lines,
 )
 from .template import ContourTemplate, identify_contour_template, to_uint8
 
-__all__ = ["METHODS", "TrackResult", "Tracker", "track"]
+__all__ = ["DEFAULT_METHOD", "METHODS", "TrackResult", "Tracker", "track"]
 
-METHODS = ("ic", "contour", "ssd")
+METHODS = ("ic", "contour", "ssd", "hb")
+#: The method :class:`Tracker` uses unless told otherwise: the best measured combination.
+DEFAULT_METHOD = "ic"
 
 
 @dataclass(frozen=True)
@@ -51,7 +70,8 @@ class TrackResult:
     x, y : float
         Position in px (pixel centres at integer coordinates); NaN when ``ok`` is False.
     score : float
-        Match quality in [0, 1] (method-specific; see :class:`Tracker`).
+        Match quality, 1 = perfect (``"ic"``, ``"ssd"``, ``"hb"``: normalised correlation with
+        the template; ``"contour"``: fraction of contour pixels on an edge); 0 when lost.
     ok : bool
         False when the target is lost or the frame is unusable.
     reason : str
@@ -65,132 +85,302 @@ class TrackResult:
     reason: str = ""
 
 
+def _as_frame(frame) -> np.ndarray:
+    """Validate dtype and dimensions without copying (the hot path converts only crops)."""
+    arr = np.asarray(frame)
+    if arr.dtype == bool or not (np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating)):
+        raise TypeError(f"frame must hold real gray levels (uint8, uint16 or float), got dtype {arr.dtype}")
+    if arr.ndim != 2:
+        raise ValueError(f"frame must be a 2-D gray image, got shape {arr.shape}")
+    if arr.size == 0:
+        raise ValueError("frame is empty")
+    return arr
+
+
+def _crop(arr, x0, y0, x1, y1) -> np.ndarray:
+    """float32 copy of ``arr[y0:y1, x0:x1]``; ValueError if it holds NaN/inf."""
+    out = np.asarray(arr[y0:y1, x0:x1], np.float32)
+    if np.issubdtype(arr.dtype, np.floating) and not np.isfinite(out).all():
+        raise ValueError("NaN or infinite pixels where the target is searched")
+    return out
+
+
 class Tracker:
-    """Track the probe tip from frame to frame.
+    """Track the probe tip from frame to frame (paper, Fig. 4).
 
     Parameters
     ----------
-    method : {"ic", "contour", "ssd"}
-        See the module docstring. ``"ic"`` is the default because it measured best (see
-        ``benchmarks/bench_tracking.py``).
+    method : {"ic", "contour", "ssd", "hb"}
+        See the module docstring; ``"ic"`` is the default because it measured best.
     search_size : int
-        Side of the square search window around the last position (paper: 300 px).
-    sigma, threshold, morph_kernel, morph_iterations
+        Side of the square search window around the predicted position (paper: 300 px).
+    sigma, threshold, morph_kernel, morph_iterations, bright_object
         Contour template identification (:func:`semlab.template.identify_contour_template`).
     canny_sigma, canny_low, canny_high
-        Edge detection for ``"contour"`` (:func:`semlab.edges.canny_edges`; adaptive unless both
-        thresholds are given).
+        Edge detection of ``"contour"`` (:func:`semlab.edges.canny_edges`; thresholds adaptive by
+        eq. 10 unless both are given).
+    contour_tolerance : int
+        ``"contour"``: an edge within this many px of a contour pixel counts as a hit.
+    subpixel : bool or None
+        Refine the integer match of ``"contour"``/``"ssd"`` by one step of eq. 9 (default: True
+        for ``"contour"``, False for ``"ssd"``, whose conventional form is integer-only).
     band_px : int
         Half-width of the band around the contour used for sub-pixel registration.
     huber : float or None
-        Huber threshold (robust standard deviations) of ``"ic"``.
+        ``"ic"``: Huber threshold in robust standard deviations (None: plain least squares).
+    whiten : bool
+        ``"ic"``: undo the scan line's noise correlation (:func:`semlab.subpixel.whiten_lines`).
+    noise_weights : bool
+        ``"ic"``: weight pixels by their inverse shot-noise variance.
+    photometric : bool
+        ``"ic"``: estimate gain and offset per frame.
     template_frames : int
-        ``"ic"`` averages the template over this many well-registered frames.
-    min_score : float
-        Below this score a frame counts as lost.
+        ``"ic"`` averages the template over this many well-registered frames (1: frame 0 only).
     coarse_factor : int
-        Downsampling of ``"ic"``'s coarse search.
+        ``"ic"``: downsampling of the coarse search.
+    max_iterations : int
+        Gauss–Newton iterations per frame (``"ic"``, ``"hb"``).
+    min_score : float or None
+        Absolute score below which a frame counts as lost (default per method).
+    min_relative_score : float
+        ``"ic"``: a frame also counts as lost when its score falls below this fraction of the
+        typical score of the first frames (low-dose images have low correlations even when
+        right).
+    coarse_sigma : float
+        ``"ic"``: Gaussian smoothing (px) of template and image in the first registration stage
+        of every frame (0: single stage at full resolution).
+    jacobian_sigma : float
+        ``"ic"``: Gaussian smoothing (px) of the template before its gradients (the Jacobian)
+        are taken; 0 uses the raw template's gradients.
+    normal_sigma : float
+        ``"ic"``: the Jacobian keeps only the gradient component along the edge normal, taken
+        from the template smoothed by this many px (0: keep the whole gradient).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from semlab.tracking import Tracker
+    >>> yy, xx = np.mgrid[:240, :320]
+    >>> def frame(dx):
+    ...     return np.where((xx - 150 - dx) ** 2 + (yy - 120) ** 2 < 30 ** 2, 200.0, 60.0).astype(np.float32)
+    >>> t = Tracker()
+    >>> _ = t.init(frame(0), (100, 70, 100, 100))
+    >>> r = t.update(frame(3))
+    >>> r.ok, round(r.x - 149.5)
+    (True, 3)
     """
 
-    def __init__(self, method: str = "ic", *, search_size: int = 300, sigma: float = 2.0,
+    def __init__(self, method: str = DEFAULT_METHOD, *, search_size: int = 300, sigma: float = 2.0,
                  threshold: float | None = None, morph_kernel: int = 3, morph_iterations: int = 1,
-                 canny_sigma: float = 1.0, canny_low: float | None = None, canny_high: float | None = None,
-                 band_px: int = 3, huber: float | None = 2.0, template_frames: int = 20,
-                 min_score: float | None = None, coarse_factor: int = 4):
+                 bright_object: bool = True, canny_sigma: float = 2.0, canny_low: float | None = None,
+                 canny_high: float | None = None, contour_tolerance: int = 1, subpixel: bool | None = None,
+                 band_px: int = 3, huber: float | None = 2.0, whiten: bool = True, noise_weights: bool = True,
+                 photometric: bool = True, template_frames: int = 20, coarse_factor: int = 4,
+                 max_iterations: int = 20, min_score: float | None = None, min_relative_score: float = 0.5,
+                 coarse_sigma: float = 1.0, jacobian_sigma: float = 0.7, jacobian_sigma_first: float = 2.0,
+                 normal_sigma: float = 0.0):
         if method not in METHODS:
             raise ValueError(f"unknown method {method!r}; choose one of {METHODS}")
-        if search_size < 16:
-            raise ValueError(f"search_size must be at least 16 px, got {search_size}")
+        if int(search_size) != search_size or search_size < 16:
+            raise ValueError(f"search_size must be an integer of at least 16 px, got {search_size!r}")
+        if int(band_px) != band_px or band_px < 1:
+            raise ValueError(f"band_px must be a positive integer, got {band_px!r}")
+        if int(coarse_factor) != coarse_factor or coarse_factor < 1:
+            raise ValueError(f"coarse_factor must be a positive integer, got {coarse_factor!r}")
+        if huber is not None and not huber > 0:
+            raise ValueError(f"huber must be > 0 or None, got {huber!r}")
+        if int(max_iterations) != max_iterations or max_iterations < 1:
+            raise ValueError(f"max_iterations must be a positive integer, got {max_iterations!r}")
+        if not 0 <= min_relative_score < 1:
+            raise ValueError(f"min_relative_score must lie in [0, 1), got {min_relative_score!r}")
         self.method = method
         self.search_size = int(search_size)
         self.template_params = {"sigma": sigma, "threshold": threshold, "morph_kernel": morph_kernel,
-                                    "morph_iterations": morph_iterations}
+                                "morph_iterations": morph_iterations, "bright_object": bright_object}
         self.canny = {"sigma": canny_sigma, "low": canny_low, "high": canny_high}
+        self.contour_tolerance = int(contour_tolerance)
+        self.subpixel = (method == "contour") if subpixel is None else bool(subpixel)
         self.band_px = int(band_px)
         self.huber = huber
+        self.whiten = bool(whiten)
+        self.noise_weights = bool(noise_weights)
+        self.photometric = bool(photometric)
         self.template_frames = max(int(template_frames), 1)
-        self.min_score = {"ic": 0.5, "contour": 0.3, "ssd": 0.5}[method] if min_score is None else float(min_score)
         self.coarse_factor = int(coarse_factor)
+        self.max_iterations = int(max_iterations)
+        self.coarse_sigma = float(coarse_sigma)
+        self.jacobian_sigma = float(jacobian_sigma)
+        self.normal_sigma = float(normal_sigma)
+        self.jacobian_sigma_first = float(jacobian_sigma_first)
+        default_min = {"ic": 0.1, "contour": 0.3, "ssd": 0.3, "hb": 0.3}[method]
+        self.min_score = default_min if min_score is None else float(min_score)
+        self.min_relative_score = float(min_relative_score)
         self.roi = None
 
     # ------------------------------------------------------------------ set-up
     def init(self, frame, roi) -> TrackResult:
-        """Take the template from ``frame`` inside ``roi = (x, y, w, h)``.
+        """Take the template from ``frame`` inside ``roi = (x, y, w, h)`` (paper, Fig. 2).
+
+        Returns
+        -------
+        TrackResult
+            The ROI's centre point, ``ok=True``.
 
         Raises
         ------
         TypeError, ValueError
-            Bad frame (dtype, dimensions, NaN), ROI not wholly inside the frame or too small,
-            or no contour in the ROI.
+            Bad frame (dtype, dimensions, NaN/inf, empty), ROI not wholly inside the frame or too
+            small, a constant ROI, or no usable contour in the ROI.
         """
         image = as_gray_float(frame)
-        self.roi = check_roi(roi, image.shape)
-        x0, y0, w, h = self.roi
-        patch = image[y0:y0 + h, x0:x0 + w]
+        roi = check_roi(roi, image.shape, min_size=16)
+        x0, y0, w, h = roi
+        patch = image[y0:y0 + h, x0:x0 + w].copy()
         if float(patch.max() - patch.min()) <= 0:
-            raise ValueError(f"the ROI {self.roi} is constant: nothing to track")
-        self.contour: ContourTemplate = identify_contour_template(patch, **self.template_params)
-        self.band = self._band(self.contour.mask, self.band_px)
-        if self.band.sum() < 10:
-            raise ValueError("the contour template leaves fewer than 10 pixels away from the ROI border")
-        self.template = patch.copy()
-        self._frame0 = image if (self.method == "ic" and self.template_frames > 1) else None
+            raise ValueError(f"the ROI {roi} is constant: nothing to track")
+        contour = identify_contour_template(patch, **self.template_params)
+        band = self._band(contour.mask, self.band_px)
+        if band.sum() < 10:
+            raise ValueError(f"the contour template in ROI {roi} leaves fewer than 10 pixels away from the "
+                             "ROI border: enlarge the ROI or move it onto the tip")
+        self.roi = roi
+        self.contour: ContourTemplate = contour
+        self.band = band
+        inner = self._inner(contour.mask.shape, 2)
+        self._contour_core = contour.mask & inner
+        if self._contour_core.sum() < 5:
+            self._contour_core = contour.mask
+        self.noise = estimate_noise(patch) if (self.whiten or self.noise_weights) else NoiseModel()
+        self.template = patch
         self.origin = np.zeros(2)
         self._n_averaged = 1
-        self._grid = np.mgrid[0:h, 0:w].astype(np.float32)
-        self._prepare_template()
-        self.centre0 = np.array(roi_centre(self.roi))
+        self._stack = None
+        self.centre0 = np.array(roi_centre(roi))
         self.shift = np.zeros(2)
         self.velocity = np.zeros(2)
         self.gain, self.offset = 1.0, 0.0
         self.lost = False
+        self._scores: list[float] = []
+        self.n_lost = 0
+        self._prepare_template()
+        if self.method == "ic" and self.template_frames > 1:
+            m = 16
+            ax0, ay0 = x0 - m, y0 - m
+            if ax0 >= 0 and ay0 >= 0 and x0 + w + m <= image.shape[1] and y0 + h + m <= image.shape[0]:
+                area = image[ay0:y0 + h + m, ax0:x0 + w + m].copy()
+                rho = self.noise.rho if self.whiten else 0.0
+                self._stack = [[area, (ax0, ay0), np.zeros(2), 1.0, 0.0 * (1 - rho)]]
         return TrackResult(float(self.centre0[0]), float(self.centre0[1]), 1.0, True)
 
     @staticmethod
-    def _band(mask, half_width):
-        h, w = mask.shape
+    def _inner(shape, margin):
+        h, w = shape
+        inner = np.zeros(shape, bool)
+        inner[margin:h - margin, margin:w - margin] = True
+        return inner
+
+    @classmethod
+    def _band(cls, mask, half_width):
+        """Pixels within ``half_width`` of the contour, away from the ROI border (whose contour
+        segments are where the object leaves the ROI, not edges of it)."""
         k = 2 * half_width + 1
         band = cv2.dilate(mask.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))) > 0
-        margin = half_width + 3
-        inner = np.zeros_like(band)
-        inner[margin:h - margin, margin:w - margin] = True
-        return band & inner
+        return band & cls._inner(mask.shape, half_width + 3)
 
     def _prepare_template(self):
-        # Gradients of a lightly smoothed template: noise in the Jacobian only slows Gauss–Newton.
-        gx, gy = five_point_gradients(cv2.GaussianBlur(self.template, (0, 0), 0.7))
+        """Everything the per-frame work needs from the template, computed once (offline)."""
         ys, xs = np.nonzero(self.band)
-        x0, y0 = self.roi[:2]
-        self._points = np.stack([xs + x0, ys + y0], axis=1)
-        self._values = self.template[ys, xs]
-        self._gx, self._gy = gx[ys, xs], gy[ys, xs]
-        f = self.coarse_factor
-        h, w = self.template.shape
-        self._small = cv2.resize(self.template[:h - h % f, :w - w % f], None, fx=1 / f, fy=1 / f,
-                                 interpolation=cv2.INTER_AREA)
+        self._points = np.stack([xs, ys], axis=1).astype(np.float64)  # ROI coordinates
+        self._bbox = (int(xs.min()), int(ys.min()), int(xs.max()) + 1, int(ys.max()) + 1)
+        self._t_values = self.template[ys, xs].astype(np.float64)
+        if self.method == "ic":
+            rho = self.noise.rho if self.whiten else 0.0
+            tw = whiten_lines(self.template, rho)
+            # Gradients by eq. 8's 5-point mask of the lightly smoothed template: a noisy Jacobian
+            # inflates the variance along the weakly constrained direction (along the shaft, only
+            # the apex tells x); the curvature then comes from the image (see _fit).
+            # A noisy template needs a smoother Jacobian; the averaged one a sharper one.
+            sigma_j = max(self.jacobian_sigma, self.jacobian_sigma_first / np.sqrt(self._n_averaged))
+            self._sigma_j = sigma_j
+            gx, gy = five_point_gradients(cv2.GaussianBlur(tw, (0, 0), sigma_j) if sigma_j > 0 else tw)
+            if self.normal_sigma > 0:
+                # Keep only the gradient's component along the edge normal, whose direction
+                # comes from the heavily smoothed template: noise across the normal would leak
+                # into x along a near-horizontal shaft, whose only x information is its apex.
+                nx, ny = five_point_gradients(cv2.GaussianBlur(self.template, (0, 0), self.normal_sigma))
+                norm = np.hypot(nx, ny) + 1e-12
+                nx, ny = nx / norm, ny / norm
+                along = gx * nx + gy * ny
+                gx, gy = along * nx, along * ny
+            self._tw_values = tw[ys, xs].astype(np.float64)
+            self._gx, self._gy = gx[ys, xs].astype(np.float64), gy[ys, xs].astype(np.float64)
+            # The same, smoothed: the first, robust stage of every frame's registration.
+            tws = cv2.GaussianBlur(tw, (0, 0), self.coarse_sigma) if self.coarse_sigma > 0 else tw
+            sgx, sgy = five_point_gradients(tws)
+            self._tws_values = tws[ys, xs].astype(np.float64)
+            self._sgx, self._sgy = sgx[ys, xs].astype(np.float64), sgy[ys, xs].astype(np.float64)
+            self._inside = self.contour.region[ys, xs]
+            self._gx, self._gy = gx[ys, xs].astype(np.float64), gy[ys, xs].astype(np.float64)
+            if self.noise_weights:
+                level = cv2.GaussianBlur(self.template, (0, 0), 1.0)[ys, xs]
+                var = self.noise.variance(level)
+                self._weights = var.min() / var
+            else:
+                self._weights = None
+            f = self.coarse_factor
+            h, w = self.template.shape
+            hc, wc = h - h % f, w - w % f
+            self._small = cv2.resize(self.template[:hc, :wc], (wc // f, hc // f), interpolation=cv2.INTER_AREA)
+            # The coarse search sees the object and its immediate surroundings only, so that static
+            # background in the ROI does not pull the match back when the probe moves.
+            k = 8 * f + 1
+            region = cv2.dilate((self.contour.region | self.band).astype(np.uint8),
+                                cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k)))
+            mask = cv2.resize(region[:hc, :wc].astype(np.float32), (wc // f, hc // f),
+                              interpolation=cv2.INTER_AREA) > 0.5
+            if mask.sum() >= 4 and np.ptp(self._small[mask]) > 0:
+                # Outside the object's neighbourhood the template is flat (its mean there), so
+                # it adds nothing to the correlation's numerator: a mask at the price of none.
+                self._small = np.where(mask, self._small, float(self._small[mask].mean())).astype(np.float32)
+        elif self.method == "hb":
+            h, w = self.template.shape
+            inner = self._inner((h, w), 3)
+            self._hb_mask = inner
+            self._m0 = offline_matrix(self.template, inner)
+            yy, xx = np.nonzero(inner)
+            self._hb_points = np.stack([xx, yy], axis=1).astype(np.float64)
+            self._hb_values = self.template[yy, xx].astype(np.float64)
 
     # ------------------------------------------------------------------ per frame
     def update(self, frame) -> TrackResult:
-        """Locate the target in the next frame; never raises for bad frames or a lost target."""
+        """Locate the target in the next frame.
+
+        Never raises for a bad frame or a lost target: the result then has ``ok=False``, NaN
+        position, score 0 and a ``reason``.
+
+        Raises
+        ------
+        RuntimeError
+            If :meth:`init` was not called first.
+        """
         if self.roi is None:
             raise RuntimeError("call init(frame, roi) before update(frame)")
         try:
-            image = as_gray_float(frame)
+            arr = _as_frame(frame)
         except (TypeError, ValueError) as err:
             return self._lost(f"unusable frame: {err}")
-        if float(image.max() - image.min()) <= 0:
-            return self._lost("constant frame")
-        if image.shape[0] < self.roi[3] or image.shape[1] < self.roi[2]:
-            return self._lost(f"frame {image.shape} smaller than the ROI")
+        if arr.shape[0] < self.roi[3] + 4 or arr.shape[1] < self.roi[2] + 4:
+            return self._lost(f"frame {arr.shape} is smaller than the ROI")
+        update = {"ic": self._update_ic, "contour": self._update_contour, "ssd": self._update_ssd,
+                  "hb": self._update_hb}[self.method]
         try:
-            result = {"ic": self._update_ic, "contour": self._update_contour, "ssd": self._update_ssd}[
-                self.method](image)
-        except (cv2.error, np.linalg.LinAlgError, ValueError, FloatingPointError) as err:
-            return self._lost(f"matching failed: {err}")
-        return result
+            return update(arr)
+        except (cv2.error, np.linalg.LinAlgError, ValueError, FloatingPointError, IndexError) as err:
+            return self._lost(f"{err}")
 
     def _lost(self, reason: str) -> TrackResult:
         self.lost = True
+        self.n_lost += 1
         self.velocity[:] = 0.0
         return TrackResult(float("nan"), float("nan"), 0.0, False, reason)
 
@@ -202,91 +392,244 @@ class Tracker:
         x, y = self.centre0 + shift - self.origin
         return TrackResult(float(x), float(y), float(score), True)
 
-    def _window(self, image, shift):
+    def _window(self, shape, shift):
         """Search window (x0, y0, w, h) centred on the template at ``shift``; the whole image when lost."""
         if self.lost:
-            return 0, 0, image.shape[1], image.shape[0]
+            return 0, 0, shape[1], shape[0]
         _x0, _y0, w, h = self.roi
         size = max(self.search_size, w + 2, h + 2)
         cx, cy = roi_centre(self.roi)
-        return clip_window(cx + shift[0], cy + shift[1], size, size, image.shape)
+        return clip_window(cx + shift[0], cy + shift[1], size, size, shape)
 
-    def _in_frame(self, shift, shape) -> bool:
-        x0, y0, w, h = self.roi
-        return (x0 + shift[0] >= 0 and y0 + shift[1] >= 0 and x0 + shift[0] + w <= shape[1]
-                and y0 + shift[1] + h <= shape[0])
+    def _band_inside(self, shift, shape, margin=2) -> bool:
+        bx0, by0, bx1, by1 = self._bbox
+        x0, y0 = self.roi[:2]
+        return (x0 + bx0 + shift[0] >= margin and y0 + by0 + shift[1] >= margin
+                and x0 + bx1 - 1 + shift[0] <= shape[1] - 1 - margin
+                and y0 + by1 - 1 + shift[1] <= shape[0] - 1 - margin)
 
-    def _update_ic(self, image) -> TrackResult:
-        predicted = self.shift + self.velocity
-        wx, wy, ww, wh = self._window(image, predicted)
+    # ---- "ic"
+    def _coarse(self, arr, predicted):
+        """Coarse template position by masked normalised correlation at 1/coarse_factor scale."""
+        wx, wy, ww, wh = self._window(arr.shape, predicted)
         f = self.coarse_factor
-        window = image[wy:wy + wh - wh % f, wx:wx + ww - ww % f]
-        small = cv2.resize(window, None, fx=1 / f, fy=1 / f, interpolation=cv2.INTER_AREA)
+        window = _crop(arr, wx, wy, wx + ww - ww % f, wy + wh - wh % f)
+        if float(window.max() - window.min()) <= 0:
+            raise ValueError("the search window is constant")
+        small = window if f == 1 else cv2.resize(window, (ww // f, wh // f), interpolation=cv2.INTER_AREA)
         if small.shape[0] < self._small.shape[0] or small.shape[1] < self._small.shape[1]:
-            return self._lost("search window smaller than the template")
+            raise ValueError("the search window is smaller than the template")
         scores = cv2.matchTemplate(small, self._small, cv2.TM_CCOEFF_NORMED)
+        scores = np.nan_to_num(scores, nan=-1.0, posinf=-1.0, neginf=-1.0)
         _, _, _, (ix, iy) = cv2.minMaxLoc(scores)
         px, py = parabola_peak(scores, ix, iy)
-        # Block-averaging by f maps both images alike: small offset px is image offset f * px.
-        coarse = np.array([wx + f * px - self.roi[0], wy + f * py - self.roi[1]])
-        fit = gauss_newton_translation(image, self._points, self._values, self._gx, self._gy, coarse,
-                                       gain0=self.gain, offset0=self.offset, huber=self.huber)
-        if not fit.converged or fit.score < self.min_score or not self._in_frame(fit.shift, image.shape):
-            return self._lost(f"no match (score {fit.score:.2f})")
+        # Block-averaging by f maps both images alike: an offset k in the small image is f·k.
+        return np.array([wx + f * px - self.roi[0], wy + f * py - self.roi[1]])
+
+    def _fit(self, arr, shift0, gain0, offset0, margin=12, at=(0, 0), robust_start=True):
+        """Gauss–Newton on the contour band of the whitened crop around ``shift0``.
+
+        ``arr`` is the frame, or a part of it whose pixel [0, 0] is the frame's pixel ``at``.
+        """
+        x0, y0 = self.roi[0] - at[0], self.roi[1] - at[1]
+        bx0, by0, bx1, by1 = self._bbox
+        sx, sy = int(round(shift0[0])), int(round(shift0[1]))
+        cx0, cy0 = max(x0 + bx0 + sx - margin, 0), max(y0 + by0 + sy - margin, 0)
+        cx1 = min(x0 + bx1 + sx + margin, arr.shape[1])
+        cy1 = min(y0 + by1 + sy + margin, arr.shape[0])
+        if cx1 - cx0 < 8 or cy1 - cy0 < 8:
+            raise ValueError("the target is outside the image")
+        crop = _crop(arr, cx0, cy0, cx1, cy1)
+        rho = self.noise.rho if self.whiten else 0.0
+        cw = whiten_lines(crop, rho)
+        pts = self._points + (x0 - cx0, y0 - cy0)
+        common = dict(weights=self._weights, huber=self.huber, photometric=self.photometric,
+                      regions=self._inside)
+        if self.coarse_sigma > 0 and robust_start:
+            # Stage 1, both images smoothed alike: a wide basin and a smooth cost, so a start a few
+            # px off (or a noisy one-frame template) converges to the right minimum.
+            smooth = cv2.GaussianBlur(cw, (0, 0), self.coarse_sigma)
+            first = gauss_newton_translation(smooth, pts, self._tws_values, self._sgx, self._sgy, shift0,
+                                             gain0=gain0, offset0=offset0, max_iterations=self.max_iterations,
+                                             tolerance=0.02, **common)
+            if first.converged:
+                shift0, gain0, offset0 = first.shift, first.gain, first.offset
+        # Stage 2, full resolution: the efficient estimate. A strongly smoothed Jacobian (young
+        # template) takes its curvature from the image; a light one is close enough to exact.
+        curvature = five_point_gradients(cw) if self._sigma_j > 1.0 else None
+        fit = gauss_newton_translation(cw, pts, self._tw_values, self._gx, self._gy, shift0,
+                                       gain0=gain0, offset0=offset0, max_iterations=self.max_iterations,
+                                       curvature=curvature, **common)
+        moved = float(np.max(np.abs(fit.shift - np.asarray(shift0, float)))) if np.all(np.isfinite(fit.shift)) else np.inf
+        if moved > margin - 3:
+            fit.converged = False
+        plain = cv2.remap(crop, (pts[:, 0] + fit.shift[0]).astype(np.float32).reshape(1, -1),
+                          (pts[:, 1] + fit.shift[1]).astype(np.float32).reshape(1, -1), cv2.INTER_CUBIC,
+                          borderMode=cv2.BORDER_REPLICATE).reshape(-1) if np.isfinite(moved) else None
+        score = weighted_ncc(plain, self._t_values, fit.weights) if plain is not None else 0.0
+        return fit, score
+
+    def _threshold(self) -> float:
+        if len(self._scores) >= 3:
+            return max(self.min_score, self.min_relative_score * float(np.median(self._scores)))
+        return self.min_score
+
+    def _update_ic(self, arr) -> TrackResult:
+        predicted = self.shift + self.velocity
+        coarse = self._coarse(arr, predicted)
+        # The coarse peak is good to a coarse pixel or two (less along a straight shaft, whose
+        # correlation peak is a ridge); the constant-velocity prediction is better whenever it
+        # agrees with it, which saves Gauss–Newton iterations.
+        agree = not self.lost and float(np.max(np.abs(coarse - predicted))) <= 2 * self.coarse_factor
+        start = predicted if agree else coarse
+        # While tracking steadily with a good template, the prediction is within a fraction of
+        # a pixel and the smoothed first stage would only cost time.
+        steady = agree and self._stack is None and float(np.hypot(*self.velocity)) < 2.0
+        fit, score = self._fit(arr, start, self.gain, self.offset, robust_start=not steady)
+        if steady and not fit.converged:
+            fit, score = self._fit(arr, start, self.gain, self.offset)
+        if not fit.converged:
+            # A wrong coarse peak (e.g. clutter) or a bad start: try the other starting point.
+            other = coarse if agree else (predicted if not self.lost else None)
+            if other is not None:
+                fit2, score2 = self._fit(arr, other, self.gain, self.offset)
+                if fit2.converged:
+                    fit, score = fit2, score2
+        if not fit.converged:
+            return self._lost(f"no convergence (score {score:.2f})")
+        if score < self._threshold():
+            return self._lost(f"no match (score {score:.2f} < {self._threshold():.2f})")
+        if not self._band_inside(fit.shift, arr.shape):
+            return self._lost("the target reaches the image border")
         self.gain, self.offset = fit.gain, fit.offset
-        if self._frame0 is not None and fit.inliers > 0.9 and fit.score > 0.8:
-            self._average_into_template(image, fit)
-        return self._accept(fit.shift, fit.score)
+        if len(self._scores) < 10:
+            self._scores.append(score)
+        if self._stack is not None and fit.inliers > 0.8 and score >= 0.8 * np.median(self._scores):
+            self._average_into_template(arr, fit)
+        return self._accept(fit.shift, score)
 
-    def _average_into_template(self, image, fit):
-        """Running mean of the registered, photometrically normalised ROI (a less noisy template)."""
-        x0, y0, _w, _h = self.roi
-        ys, xs = self._grid
-        mx = (xs + x0 + fit.shift[0]).astype(np.float32)
-        my = (ys + y0 + fit.shift[1]).astype(np.float32)
-        patch = cv2.remap(image, mx, my, cv2.INTER_CUBIC, borderMode=cv2.BORDER_REPLICATE)
-        patch = (patch - fit.offset) / fit.gain
-        n = self._n_averaged
-        self.template = ((self.template * n + patch) / (n + 1)).astype(np.float32)
-        self._n_averaged = n + 1
-        self._prepare_template()
-        # Frame 0 defines the origin: re-register it against the better template so that its
-        # own noise does not offset every later position.
-        ref = gauss_newton_translation(self._frame0, self._points, self._values, self._gx, self._gy,
-                                       self.origin, huber=self.huber)
-        if ref.converged:
-            self.origin = ref.shift
-        if self._n_averaged >= self.template_frames:
-            self._frame0 = None
+    def _average_into_template(self, arr, fit):
+        """Running mean of the registered, photometrically normalised ROI (a less noisy template).
 
-    def _update_contour(self, image) -> TrackResult:
-        wx, wy, ww, wh = self._window(image, self.shift)
-        window = image[wy:wy + wh, wx:wx + ww]
+        The ROI's surroundings are kept for the first ``template_frames`` frames; at the end all
+        of them are registered again against the averaged template and averaged anew, so that the
+        early registrations against a noisy template do not blur the final one. Frame 0 is
+        registered against every new template: it defines the origin, which so carries frame 0's
+        noise once instead of the one-frame template's noise in every position.
+        """
+        x0, y0, w, h = self.roi
+        m = 16
+        sx, sy = int(round(fit.shift[0])), int(round(fit.shift[1]))
+        ax0, ay0 = x0 + sx - m, y0 + sy - m
+        if ax0 < 0 or ay0 < 0 or ax0 + w + 2 * m > arr.shape[1] or ay0 + h + 2 * m > arr.shape[0]:
+            return
+        area = _crop(arr, ax0, ay0, ax0 + w + 2 * m, ay0 + h + 2 * m)
+        self._stack.append([area, (ax0, ay0), fit.shift.copy(), fit.gain, fit.offset])
+        n = len(self._stack)
+        self._n_averaged = n
+        if n >= self.template_frames:
+            self._rebuild_template()
+            self._stack = None
+        else:
+            patch = self._registered_patch(area, (ax0, ay0), fit.shift, fit.gain, fit.offset)
+            self.template = ((self.template * (n - 1) + patch) / n).astype(np.float32)
+            self._prepare_template()
+            area0, at0, shift0, gain0, offset0 = self._stack[0]
+            ref, _ = self._fit(area0, shift0, gain0, offset0, at=at0)
+            if ref.converged:
+                self._stack[0][2:] = [ref.shift.copy(), ref.gain, ref.offset]
+                self.origin = ref.shift.copy()
+
+    def _registered_patch(self, area, at, shift, gain, offset):
+        """The ROI-sized patch of ``area`` at ``shift``, in the template's gray levels."""
+        x0, y0, w, h = self.roi
+        # The same exact Keys interpolation as the registration: another kernel (OpenCV's
+        # a = −0.75, positions rounded to 1/32 px) would shift sharp edges by a few hundredths
+        # of a pixel at every averaging step, and the template would drift.
+        ys, xs = np.mgrid[0:h, 0:w]
+        grid = np.stack([xs.ravel() + x0 - at[0], ys.ravel() + y0 - at[1]], axis=1)
+        patch = sample_shifted_filtered(area, grid, shift).reshape(h, w).astype(np.float32)
+        rho = self.noise.rho if self.whiten else 0.0
+        # Gain and offset were estimated on whitened images: a constant c whitens to (1 − ρ)·c.
+        return (patch - offset / (1.0 - rho)) / gain
+
+    def _rebuild_template(self, passes=1):
+        for _ in range(passes):
+            total, count = np.zeros_like(self.template), 0
+            for item in self._stack:
+                area, at, shift, gain, offset = item
+                ref, _ = self._fit(area, shift, gain, offset, at=at)
+                if ref.converged:
+                    item[2:] = [ref.shift.copy(), ref.gain, ref.offset]
+                total += self._registered_patch(area, at, item[2], item[3], item[4])
+                count += 1
+            self.template = (total / count).astype(np.float32)
+            self._prepare_template()
+        # The origin: where frame 0 (the first item) sits against the new template.
+        self.origin = np.asarray(self._stack[0][2], float).copy()
+
+    # ---- "contour", "ssd", "hb"
+    def _update_contour(self, arr) -> TrackResult:
+        wx, wy, ww, wh = self._window(arr.shape, self.shift)
+        window = _crop(arr, wx, wy, wx + ww, wy + wh)
+        if float(window.max() - window.min()) <= 0:
+            return self._lost("constant search window")
         edges = canny_edges(to_uint8(window), **self.canny)
-        ix, iy, score, _ = contour_match(edges, self.contour.mask)
-        return self._refine_eq9(image, wx + ix, wy + iy, score, mask=self.band)
+        ix, iy, score, _ = contour_match(edges, self._contour_core, tolerance_px=self.contour_tolerance)
+        return self._finish_integer(arr, wx + ix, wy + iy, score, mask=self.band)
 
-    def _update_ssd(self, image) -> TrackResult:
-        wx, wy, ww, wh = self._window(image, self.shift)
-        window = image[wy:wy + wh, wx:wx + ww]
+    def _update_ssd(self, arr) -> TrackResult:
+        wx, wy, ww, wh = self._window(arr.shape, self.shift)
+        window = _crop(arr, wx, wy, wx + ww, wy + wh)
         ix, iy, _ = ssd_match(window, self.template)
         _x0, _y0, w, h = self.roi
-        patch = image[wy + iy:wy + iy + h, wx + ix:wx + ix + w]
-        score = float(cv2.matchTemplate(patch, self.template, cv2.TM_CCOEFF_NORMED)[0, 0])
-        return self._refine_eq9(image, wx + ix, wy + iy, score, mask=None)
+        patch = window[iy:iy + h, ix:ix + w]
+        score = weighted_ncc(patch.ravel(), self.template.ravel())
+        return self._finish_integer(arr, wx + ix, wy + iy, score, mask=None)
 
-    def _refine_eq9(self, image, left, top, score, mask) -> TrackResult:
-        """Integer match at top-left (left, top), refined by the paper's eq. 9."""
+    def _finish_integer(self, arr, left, top, score, mask) -> TrackResult:
+        """Integer match with top-left (left, top), optionally refined by the paper's eq. 9."""
         if score < self.min_score:
-            return self._lost(f"no match (score {score:.2f})")
+            return self._lost(f"no match (score {score:.2f} < {self.min_score:.2f})")
         x0, y0, w, h = self.roi
-        patch = image[top:top + h, left:left + w]
-        dx, dy = gradient_subpixel_shift(self.template, patch, mask=mask)
-        if not (np.isfinite(dx) and np.isfinite(dy)):
-            dx = dy = 0.0
-        # One linearised step is only trusted within half a pixel.
-        dx, dy = float(np.clip(dx, -1.0, 1.0)), float(np.clip(dy, -1.0, 1.0))
+        dx = dy = 0.0
+        if self.subpixel:
+            patch = _crop(arr, left, top, left + w, top + h)
+            dx, dy = gradient_subpixel_shift(self.template, patch, mask=mask)
+            if not (np.isfinite(dx) and np.isfinite(dy)):
+                dx = dy = 0.0
+            # One linearised step is only trusted within a pixel.
+            dx, dy = float(np.clip(dx, -1.0, 1.0)), float(np.clip(dy, -1.0, 1.0))
         return self._accept((left - x0 + dx, top - y0 + dy), score)
+
+    def _update_hb(self, arr) -> TrackResult:
+        wx, wy, ww, wh = self._window(arr.shape, self.shift)
+        window = _crop(arr, wx, wy, wx + ww, wy + wh)
+        ix, iy, _ = ssd_match(window, self.template)
+        x0, y0, w, h = self.roi
+        p = np.array([wx + ix - x0, wy + iy - y0], float)
+        m0 = self._m0
+        solve = np.linalg.inv(m0.T @ m0) @ m0.T  # (M₀ᵀM₀)⁻¹M₀ᵀ, offline in a real-time loop
+        pts = self._hb_points + (x0, y0)
+        converged = False
+        for _ in range(self.max_iterations):
+            warped = cv2.remap(window, (pts[:, 0] + p[0] - wx).astype(np.float32).reshape(1, -1),
+                               (pts[:, 1] + p[1] - wy).astype(np.float32).reshape(1, -1), cv2.INTER_CUBIC,
+                               borderMode=cv2.BORDER_REPLICATE).reshape(-1)
+            delta = -solve @ (warped - self._hb_values)  # eq. 5
+            # Eq. 5 linearises the template: the increment moves the template, the image moves back.
+            p -= delta
+            if float(np.hypot(*delta)) < 1e-3:
+                converged = True
+                break
+            if np.max(np.abs(p - [wx + ix - x0, wy + iy - y0])) > 3:
+                break
+        score = weighted_ncc(warped, self._hb_values)
+        if not converged:
+            return self._lost(f"no convergence (score {score:.2f})")
+        if score < self.min_score:
+            return self._lost(f"no match (score {score:.2f} < {self.min_score:.2f})")
+        return self._accept(p, score)
 
 
 def _iter_frames(frames):
@@ -296,14 +639,27 @@ def _iter_frames(frames):
         if frames.ndim != 3:
             raise ValueError(f"a frame array must be 3-D (N, H, W), got shape {frames.shape}")
         return iter(frames), len(frames)
+    if isinstance(frames, (str, bytes)):
+        raise TypeError("frames must be arrays, not a path; read them with semlab.io.read_frames")
     try:
         n = len(frames)
     except TypeError:
         n = None
-    return iter(frames), n
+    try:
+        return iter(frames), n
+    except TypeError:
+        raise TypeError(f"frames must be an iterable of 2-D arrays or a 3-D array, got {type(frames).__name__}") from None
 
 
-def track(frames, roi, *, method: str = "ic", progress: bool | None = None, **params) -> pd.DataFrame:
+def _is_roi_list(roi) -> bool:
+    try:
+        first = roi[0]
+    except (TypeError, IndexError, KeyError):
+        return False
+    return not np.isscalar(first)
+
+
+def track(frames, roi, *, method: str = "contour", progress: bool | None = None, **params) -> pd.DataFrame:
     """Track the ROI's centre point through a sequence of frames.
 
     Parameters
@@ -312,10 +668,11 @@ def track(frames, roi, *, method: str = "ic", progress: bool | None = None, **pa
         uint8, uint16 or float gray frames.
     roi : (x, y, w, h), or a list of them
         ROI in frame 0 (top-left pixel and size). A list tracks several targets (e.g. the four
-        probes) in one pass over the frames and adds a ``target`` column.
-    method : {"ic", "contour", "ssd"}
-        ``"contour"`` is the paper's method, ``"ssd"`` the conventional baseline, ``"ic"`` the
-        default (see :class:`Tracker`).
+        probes) in one pass over the frames, one :class:`Tracker` each, and adds a ``target``
+        column (the index in the list).
+    method : {"contour", "ic", "ssd", "hb"}
+        ``"contour"`` (default) is the paper's method, ``"ssd"`` the conventional baseline and
+        ``"ic"`` semlab's best (the default of :class:`Tracker`); see the module docstring.
     progress : bool or None
         tqdm progress bar; ``None`` shows it for sequences longer than 50 frames.
     **params
@@ -330,9 +687,19 @@ def track(frames, roi, *, method: str = "ic", progress: bool | None = None, **pa
     Raises
     ------
     TypeError, ValueError
-        Bad first frame or ROI (from :meth:`Tracker.init`); later bad frames only flag rows.
+        Bad first frame or ROI (from :meth:`Tracker.init`), no frames, or bad parameters; later
+        bad frames only flag their rows.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> yy, xx = np.mgrid[:240, :320]
+    >>> frames = [np.where((xx - 150 - k) ** 2 + (yy - 120) ** 2 < 30 ** 2, 200, 60).astype(np.uint8)
+    ...           for k in range(3)]
+    >>> track(frames, (100, 70, 100, 100), method="ic")[["frame", "x", "ok"]].round(1).values.tolist()
+    [[0.0, 149.5, True], [1.0, 150.5, True], [2.0, 151.5, True]]
     """
-    rois = roi if (len(roi) > 0 and not np.isscalar(roi[0])) else None
+    rois = list(roi) if _is_roi_list(roi) else None
     iterator, n = _iter_frames(frames)
     try:
         first = next(iterator)
@@ -343,7 +710,7 @@ def track(frames, roi, *, method: str = "ic", progress: bool | None = None, **pa
     for k, (t, r) in enumerate(zip(trackers, rois or [roi])):
         res = t.init(first, r)
         rows.append((0, k, res.x, res.y, res.score, res.ok))
-    show = (n is not None and n > 50) if progress is None else progress
+    show = (n is not None and n > 50) if progress is None else bool(progress)
     if show:
         from tqdm.auto import tqdm
 
@@ -353,6 +720,7 @@ def track(frames, roi, *, method: str = "ic", progress: bool | None = None, **pa
             res = t.update(frame)
             rows.append((i, k, res.x, res.y, res.score, res.ok))
     df = pd.DataFrame(rows, columns=["frame", "target", "x", "y", "score", "ok"])
+    df["ok"] = df["ok"].astype(bool)
     if rois is None:
         return df.drop(columns="target")
-    return df[["frame", "target", "x", "y", "score", "ok"]]
+    return df.sort_values(["frame", "target"], kind="stable").reset_index(drop=True)
