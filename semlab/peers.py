@@ -16,11 +16,11 @@ import cv2
 import numpy as np
 from skimage.registration import phase_cross_correlation
 
-from .roi import as_gray_float, check_roi, clip_window, roi_centre
 from .matching import parabola_peak
+from .roi import as_gray_float, check_roi, clip_window, roi_centre
 from .tracking import Tracker, TrackResult
 
-__all__ = ["MatchTemplatePeer", "ECCPeer", "PhaseCorrelationPeer", "make_tracker", "TRACKERS"]
+__all__ = ["TRACKERS", "ECCPeer", "MatchTemplatePeer", "PhaseCorrelationPeer", "make_tracker"]
 
 
 class _Peer:

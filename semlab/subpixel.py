@@ -11,6 +11,7 @@ close to the Cramér–Rao bound of an SEM frame whose noise is correlated along
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import cv2
@@ -241,7 +242,7 @@ def estimate_noise(image, *, flat_quantile: float = 0.6) -> NoiseModel:
     # Robust straight line through the binned medians (d² is chi-square: median/0.455 = mean).
     edges = np.quantile(lv, np.linspace(0, 1, 9))
     xs, ys = [], []
-    for lo, hi in zip(edges[:-1], edges[1:]):
+    for lo, hi in itertools.pairwise(edges):
         sel = (lv >= lo) & (lv <= hi)
         if sel.sum() >= 20:
             xs.append(float(np.median(lv[sel])))

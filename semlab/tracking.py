@@ -433,7 +433,7 @@ class Tracker:
         """
         x0, y0 = self.roi[0] - at[0], self.roi[1] - at[1]
         bx0, by0, bx1, by1 = self._bbox
-        sx, sy = int(round(shift0[0])), int(round(shift0[1]))
+        sx, sy = round(shift0[0]), round(shift0[1])
         cx0, cy0 = max(x0 + bx0 + sx - margin, 0), max(y0 + by0 + sy - margin, 0)
         cx1 = min(x0 + bx1 + sx + margin, arr.shape[1])
         cy1 = min(y0 + by1 + sy + margin, arr.shape[0])
@@ -443,8 +443,8 @@ class Tracker:
         rho = self.noise.rho if self.whiten else 0.0
         cw = whiten_lines(crop, rho)
         pts = self._points + (x0 - cx0, y0 - cy0)
-        common = dict(weights=self._weights, huber=self.huber, photometric=self.photometric,
-                      regions=self._inside)
+        common = {"weights": self._weights, "huber": self.huber, "photometric": self.photometric,
+                      "regions": self._inside}
         if self.coarse_sigma > 0 and robust_start:
             # Stage 1, both images smoothed alike: a wide basin and a smooth cost, so a start a few
             # px off (or a noisy one-frame template) converges to the right minimum.
@@ -519,7 +519,7 @@ class Tracker:
         """
         x0, y0, w, h = self.roi
         m = 16
-        sx, sy = int(round(fit.shift[0])), int(round(fit.shift[1]))
+        sx, sy = round(fit.shift[0]), round(fit.shift[1])
         ax0, ay0 = x0 + sx - m, y0 + sy - m
         if ax0 < 0 or ay0 < 0 or ax0 + w + 2 * m > arr.shape[1] or ay0 + h + 2 * m > arr.shape[0]:
             return
@@ -606,7 +606,7 @@ class Tracker:
         wx, wy, ww, wh = self._window(arr.shape, self.shift)
         window = _crop(arr, wx, wy, wx + ww, wy + wh)
         ix, iy, _ = ssd_match(window, self.template)
-        x0, y0, w, h = self.roi
+        x0, y0, _w, _h = self.roi
         p = np.array([wx + ix - x0, wy + iy - y0], float)
         m0 = self._m0
         solve = np.linalg.inv(m0.T @ m0) @ m0.T  # (M₀ᵀM₀)⁻¹M₀ᵀ, offline in a real-time loop
@@ -696,8 +696,9 @@ def track(frames, roi, *, method: str = "contour", progress: bool | None = None,
     >>> yy, xx = np.mgrid[:240, :320]
     >>> frames = [np.where((xx - 150 - k) ** 2 + (yy - 120) ** 2 < 30 ** 2, 200, 60).astype(np.uint8)
     ...           for k in range(3)]
-    >>> track(frames, (100, 70, 100, 100), method="ic")[["frame", "x", "ok"]].round(1).values.tolist()
-    [[0.0, 149.5, True], [1.0, 150.5, True], [2.0, 151.5, True]]
+    >>> df = track(frames, (100, 70, 100, 100), method="ic")
+    >>> df["x"].round(1).tolist(), df["ok"].all()
+    ([149.5, 150.5, 151.5], True)
     """
     rois = list(roi) if _is_roi_list(roi) else None
     iterator, n = _iter_frames(frames)
