@@ -697,7 +697,7 @@ def track(frames, roi, *, method: str = "contour", progress: bool | None = None,
     >>> frames = [np.where((xx - 150 - k) ** 2 + (yy - 120) ** 2 < 30 ** 2, 200, 60).astype(np.uint8)
     ...           for k in range(3)]
     >>> df = track(frames, (100, 70, 100, 100), method="ic")
-    >>> df["x"].round(1).tolist(), df["ok"].all()
+    >>> df["x"].round(1).tolist(), bool(df["ok"].all())
     ([149.5, 150.5, 151.5], True)
     """
     rois = list(roi) if _is_roi_list(roi) else None
