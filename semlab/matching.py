@@ -52,7 +52,7 @@ def ssd_match(window, template) -> tuple[int, int, float]:
     return int(x), int(y), float(scores[y, x]) / t.size
 
 
-def contour_match(edges, contour_mask, *, tolerance_px: int = 1) -> tuple[int, int, float, np.ndarray]:
+def contour_match(edges, contour_mask, *, tolerance_px: int = 0, prefer=None) -> tuple[int, int, float, np.ndarray]:
     """Match a contour template against an edge map (the paper's contour-template match).
 
     For every placement of the template in the window, the score is the fraction of the
@@ -66,6 +66,10 @@ def contour_match(edges, contour_mask, *, tolerance_px: int = 1) -> tuple[int, i
     contour_mask : (h, w) array_like of bool
         The contour template (:attr:`semlab.template.ContourTemplate.mask`).
     tolerance_px : int
+        0 is the paper's score: the edge image's pixels under the contour pixels are added.
+    prefer : (float, float), optional
+        Top-left offset to prefer among equal best scores (e.g. the last position); default:
+        the first in raster order.
 
     Returns
     -------
@@ -82,6 +86,11 @@ def contour_match(edges, contour_mask, *, tolerance_px: int = 1) -> tuple[int, i
         e = cv2.dilate(e, k)
     scores = cv2.matchTemplate(e.astype(np.float32), m, cv2.TM_CCORR) / n
     _, best, _, (x, y) = cv2.minMaxLoc(scores)
+    if prefer is not None:
+        # Counts tie often (a straight edge matches equally well along itself).
+        ys, xs = np.nonzero(scores >= best - 0.5 / n)
+        k = int(np.argmin((xs - prefer[0]) ** 2 + (ys - prefer[1]) ** 2))
+        x, y = int(xs[k]), int(ys[k])
     return int(x), int(y), float(best), scores
 
 

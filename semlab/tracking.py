@@ -173,7 +173,7 @@ class Tracker:
     def __init__(self, method: str = DEFAULT_METHOD, *, search_size: int = 300, sigma: float = 2.0,
                  threshold: float | None = None, morph_kernel: int = 3, morph_iterations: int = 1,
                  bright_object: bool = True, canny_sigma: float = 2.0, canny_low: float | None = None,
-                 canny_high: float | None = None, contour_tolerance: int = 1, subpixel: bool | None = None,
+                 canny_high: float | None = None, contour_tolerance: int = 0, subpixel: bool | None = None,
                  band_px: int = 3, huber: float | None = 2.0, whiten: bool = True, noise_weights: bool = True,
                  photometric: bool = True, template_frames: int = 20, coarse_factor: int = 4,
                  max_iterations: int = 20, min_score: float | None = None, min_relative_score: float = 0.5,
@@ -263,6 +263,15 @@ class Tracker:
         self._scores: list[float] = []
         self.n_lost = 0
         self._prepare_template()
+        self._contour_offset = (0, 0)
+        if self.method == "contour":
+            # The contour (an Otsu boundary) and the Canny edges it is matched against need not
+            # coincide: the integer match in frame 0 itself is the reference that later integer
+            # matches are compared with, so that such an offset cancels in the displacement;
+            # eq. 9 then refines from the corrected integer position.
+            ix, iy = self._contour_integer(image, np.zeros(2))
+            self._contour_offset = (ix - x0, iy - y0)
+            self.shift = np.zeros(2)
         if self.method == "ic" and self.template_frames > 1:
             m = 16
             ax0, ay0 = x0 - m, y0 - m
@@ -346,7 +355,9 @@ class Tracker:
             h, w = self.template.shape
             inner = self._inner((h, w), 3)
             self._hb_mask = inner
-            self._m0 = offline_matrix(self.template, inner)
+            # M₀ from the lightly smoothed template: with the raw one, its noise inflates M₀ᵀM₀ and
+            # every increment falls short (eq. 5 then needs dozens of iterations).
+            self._m0 = offline_matrix(cv2.GaussianBlur(self.template, (0, 0), 1.0), inner)
             yy, xx = np.nonzero(inner)
             self._hb_points = np.stack([xx, yy], axis=1).astype(np.float64)
             self._hb_values = self.template[yy, xx].astype(np.float64)
@@ -569,14 +580,25 @@ class Tracker:
         self.origin = np.asarray(self._stack[0][2], float).copy()
 
     # ---- "contour", "ssd", "hb"
-    def _update_contour(self, arr) -> TrackResult:
-        wx, wy, ww, wh = self._window(arr.shape, self.shift)
+    def _contour_integer(self, arr, shift):
+        """Integer top-left of the contour template's best match (paper: adaptive Canny, eq. 10,
+        then the score from the contour pixels only), and its score."""
+        wx, wy, ww, wh = self._window(arr.shape, shift)
         window = _crop(arr, wx, wy, wx + ww, wy + wh)
         if float(window.max() - window.min()) <= 0:
-            return self._lost("constant search window")
+            raise ValueError("constant search window")
         edges = canny_edges(to_uint8(window), **self.canny)
-        ix, iy, score, _ = contour_match(edges, self._contour_core, tolerance_px=self.contour_tolerance)
-        return self._finish_integer(arr, wx + ix, wy + iy, score, mask=self.band)
+        x0, y0 = self.roi[:2]
+        prefer = (x0 + self._contour_offset[0] + shift[0] - wx, y0 + self._contour_offset[1] + shift[1] - wy)
+        ix, iy, score, _ = contour_match(edges, self._contour_core, tolerance_px=self.contour_tolerance,
+                                         prefer=prefer)
+        self._contour_score = score
+        return wx + ix, wy + iy
+
+    def _update_contour(self, arr) -> TrackResult:
+        left, top = self._contour_integer(arr, self.shift)
+        dx, dy = self._contour_offset
+        return self._finish_integer(arr, left - dx, top - dy, self._contour_score, mask=self.band)
 
     def _update_ssd(self, arr) -> TrackResult:
         wx, wy, ww, wh = self._window(arr.shape, self.shift)
@@ -607,22 +629,23 @@ class Tracker:
         window = _crop(arr, wx, wy, wx + ww, wy + wh)
         ix, iy, _ = ssd_match(window, self.template)
         x0, y0, _w, _h = self.roi
-        p = np.array([wx + ix - x0, wy + iy - y0], float)
+        start = np.array([wx + ix - x0, wy + iy - y0], float)
+        p = start.copy()
         m0 = self._m0
-        solve = np.linalg.inv(m0.T @ m0) @ m0.T  # (M₀ᵀM₀)⁻¹M₀ᵀ, offline in a real-time loop
-        pts = self._hb_points + (x0, y0)
+        solve = np.linalg.inv(m0.T @ m0) @ m0.T  # (M₀ᵀM₀)⁻¹M₀ᵀ: offline, once per template
+        pts = self._hb_points + (x0 - wx, y0 - wy)
         converged = False
+        warped = self._hb_values
         for _ in range(self.max_iterations):
-            warped = cv2.remap(window, (pts[:, 0] + p[0] - wx).astype(np.float32).reshape(1, -1),
-                               (pts[:, 1] + p[1] - wy).astype(np.float32).reshape(1, -1), cv2.INTER_CUBIC,
-                               borderMode=cv2.BORDER_REPLICATE).reshape(-1)
-            delta = -solve @ (warped - self._hb_values)  # eq. 5
-            # Eq. 5 linearises the template: the increment moves the template, the image moves back.
-            p -= delta
-            if float(np.hypot(*delta)) < 1e-3:
+            warped = sample_shifted_filtered(window, pts, p)  # I(f(R; μ), tₙ), eq. 3
+            # Eq. 5: I(f(R; μ + Δμ), tₙ) ≈ I(f(R; μ), tₙ) + M₀Δμ, with the template's gradients
+            # standing in for the image's, so that M₀ is constant; μ ← μ + Δμ.
+            delta = -solve @ (warped - self._hb_values)
+            p += delta
+            if float(np.hypot(*delta)) < 2e-3:
                 converged = True
                 break
-            if np.max(np.abs(p - [wx + ix - x0, wy + iy - y0])) > 3:
+            if np.max(np.abs(p - start)) > 3:
                 break
         score = weighted_ncc(warped, self._hb_values)
         if not converged:
