@@ -8,6 +8,7 @@ The handful of calls a notebook or a script needs, after Ru et al. (2012),
 - control: :func:`characterise_hysteresis`, :func:`fit_hysteresis`, :func:`step_response`,
   :func:`step_metrics`
 - data: :func:`read_frames`, :func:`read_image`, :func:`load_sample` (the samples in ``data/``)
+- widgets: :class:`TemplateExplorer`, :class:`TrackingPlayer`, :class:`ServoPanel`; figures in :mod:`semlab.plots`
 - the simulated rig lives in :mod:`semlab.sim`, the hardware protocols in :mod:`semlab.protocols`.
 
 Names are imported lazily, so ``import semlab`` stays fast and a notebook pays only for what it uses.
@@ -43,6 +44,10 @@ _EXPORTS = {
     "load_sample": "semlab.io",
     "list_samples": "semlab.io",
     "data_path": "semlab.io",
+    # the workbench's widgets
+    "TemplateExplorer": "semlab.widgets",
+    "TrackingPlayer": "semlab.widgets",
+    "ServoPanel": "semlab.widgets",
     # protocols
     "Microscope": "semlab.protocols",
     "Axis": "semlab.protocols",
