@@ -804,6 +804,13 @@ _REAL_SAMPLES = {
         "real-sem/contact_brightness_seq/needle_liftout_land_ib.png",
         "the reference frame taken before the first move of contact_brightness_seq",
     ),
+    "charge_neutralisation_seq": (
+        "real-sem/charge_neutralisation_seq/*_charge_neutralisation_*_eb.png",
+        (
+            "10 electron-beam frames (768x512, ~104 nm/px inferred) of a STATIC needle with a lamella: "
+            "true motion zero, very low SNR, brightness decaying 96 -> 90 (DeMarcoLab AutoLiftout, MIT)"
+        ),
+    ),
     "fei_needle": (
         "real-sem/fibsem/detection_test_image_2.tif",
         "FEI/TFS TIFF 1536x1024, 97.66 nm/px from its metadata (DeMarcoLab OpenFIBSEM, MIT)",
@@ -811,7 +818,8 @@ _REAL_SAMPLES = {
 }
 
 # Pixel sizes of the real PNGs inferred from the run's configuration (see data/real-sem/PROVENANCE.md).
-_INFERRED_PS = {"contact_brightness_seq": 80e3 / 1536, "contact_brightness_reference": 80e3 / 1536}
+_INFERRED_PS = {"contact_brightness_seq": 80e3 / 1536, "contact_brightness_reference": 80e3 / 1536,
+                "charge_neutralisation_seq": 80e3 / 768}
 
 
 def list_samples() -> dict[str, str]:
