@@ -238,7 +238,8 @@ class VisualServo:
         Fitted on this axis; it is the shadow of the axis (its state must be the axis' current command
         and history, as after :func:`~semlab.hysteresis.fit_hysteresis` or a previous servo run).
     tracker : object, optional
-        ``init/update`` tracker; default ``semlab.tracking.Tracker()``.
+        ``init/update`` tracker; default ``semlab.tracking.Tracker()`` (:func:`step_response` widens its
+        search window to the size of the step so that the feed-forward jump stays inside it).
     feedforward : bool
         Use the model's inverse (True) or only its direction and mean gain (False).
     pid : PID, optional
@@ -297,6 +298,13 @@ class VisualServo:
         self.u_lo, self.u_hi = max(a_lo, m_lo), min(a_hi, m_hi)
         if not self.u_lo < self.u_hi:
             raise ValueError("the model's voltage range does not overlap the axis limits")
+        held = getattr(axis, "command", None)  # axes that report their command are cross-checked
+        if held is not None and abs(float(held) - model.state.u) > 1e-3 * (m_hi - m_lo):
+            raise ValueError(
+                f"the model's state ({model.state.u:.6g} V) is out of step with the axis, which holds "
+                f"{float(held):.6g} V: the feed-forward would jump blind. Drive the axis through the model "
+                "(model.forward) or reset the model (model.reset(u, branch)) first"
+            )
         self.direction = np.asarray(model.direction, dtype=float)
         self.dt = float(microscope.frame_period)
         self.rows: list[dict] = []

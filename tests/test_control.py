@@ -494,3 +494,13 @@ def test_rig_characterisation_and_feedforward_step_with_the_tracker(sim_rig):
     assert (p1 - p0) @ np.asarray(d) == pytest.approx(60.0, abs=0.5)
     assert resp["ok"].all()
     assert abs(step_metrics(resp, final_frames=10)["final_error_px"]) < 0.3
+
+
+def test_a_model_out_of_step_with_the_axis_is_refused(hysteretic):
+    rig, _, model = hysteretic
+    go_to_state(rig, model, [40.0])
+    rig.axis.apply(60.0)  # someone moved the axis behind the model's back
+    rig.grab()
+    with pytest.raises(ValueError, match="out of step"):
+        step_response(rig.microscope, rig.axis, ROI, 10.0, model=model, tracker=FakeTracker(rig))
+    go_to_state(rig, model, [0.0])  # through U0: memory wiped out, model and axis agree again
