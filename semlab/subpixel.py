@@ -313,7 +313,8 @@ def _remap_points(image, xs, ys):
 def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=None, gain0=1.0,
                              offset0=0.0, max_iterations: int = 20, tolerance: float = 2e-3,
                              huber: float | None = 2.0, photometric: bool = True, regions=None,
-                             exact: bool = True, curvature=None) -> GaussNewtonResult:
+                             exact: bool = True, curvature=None, tukey: bool = False,
+                             freeze: float = 0.01) -> GaussNewtonResult:
     """Inverse-compositional Gauss–Newton for a translation with gain/offset (beyond eq. 9).
 
     Minimises ``Σ wᵢ ρ(I(xᵢ + p) − g·T(xᵢ) − o)`` over the template pixels ``xᵢ`` (eq. 2 with a
@@ -343,11 +344,17 @@ def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=N
     huber : float or None
         Huber threshold in robust standard deviations (the spread is the MAD of the first
         iteration's residuals); ``None`` for plain least squares.
+    freeze : float
+        Step (px) below which the ``regions`` gain and offset stop following the image.
+    tukey : bool
+        Once the steps are below 0.05 px, switch from Huber's weights to Tukey's biweight
+        (c = 4.685 spreads), which gives grossly wrong pixels (an occluder) no influence at all
+        where Huber's only bounds it.
     photometric : bool
         Estimate gain and offset (True) or hold them at ``gain0``, ``offset0``.
     regions : (K,) array_like of bool, optional
         With ``photometric``: take gain and offset from the mean levels of the object pixels
-        (True) and the background pixels (False) while the steps exceed 0.05 px, instead of
+        (True) and the background pixels (False) while the steps exceed ``freeze`` px, instead of
         regressing the image on the template. Means over hundreds of pixels are unbiased even
         when the template is noisy, whereas the regression's gain shrinks towards 0 when the
         template's noise is comparable with its contrast (errors in variables; low dose).
@@ -404,10 +411,11 @@ def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=N
     samples = None
     for it in range(1, max_iterations + 1):
         samples = sample(p)
-        if two_level and step > 0.05:
-            # Gain and offset follow the image while the translation still moves a lot, then
-            # stay fixed: the region means depend on the translation, and updating them at
-            # every step couples the two into an oscillation that Gauss–Newton does not model.
+        if two_level and step > freeze:
+            # Gain and offset follow the region means while the translation still moves, then
+            # stay fixed: the means move with p, a coupling that Gauss–Newton's Jacobian does not
+            # model (its steps would then shrink slowly), and that a Jacobian which did model it
+            # would correlate with the noisy template's own noise (a bias at low dose).
             g = (float(samples @ ind_in) - float(samples @ ind_out)) / (t_in - t_out)
             o = float(samples @ ind_out) - g * t_out
             if abs(g) < 1e-6:
@@ -417,8 +425,15 @@ def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=N
             z = residual * sqrt_prior
             if spread is None:
                 spread = 1.4826 * float(np.median(np.abs(z - np.median(z)))) + 1e-9
-            a = np.abs(z) / (huber * spread)
-            robust = np.minimum(1.0, 1.0 / np.maximum(a, 1e-12))
+            if step > 0.05 or not tukey:
+                a = np.abs(z) / (huber * spread)
+                robust = np.minimum(1.0, 1.0 / np.maximum(a, 1e-12))
+            else:
+                # Close to the answer, Tukey's biweight (c = 4.685 spreads, 95 % efficient for
+                # Gaussian noise) gives occluded pixels no influence at all, where Huber's only
+                # bounds it.
+                u = np.minimum(np.abs(z) / (4.685 * spread), 1.0)
+                robust = (1.0 - u * u) ** 2
         w = prior * robust
         jx, jy = g * tx, g * ty
         wjx, wjy = w * jx, w * jy
