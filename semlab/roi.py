@@ -190,7 +190,7 @@ def roi_from_motion(frames, size=200, *, sigma: float = 3.0, max_frames: int = 1
         raise ValueError("no motion found in the frames: step the probe along x or y while grabbing")
     level = max(0.3 * peak, 3.0 * float(np.median(change)))
     mask = (change >= level).astype(np.uint8)
-    n, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    _, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
     biggest = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
     ys, xs = np.nonzero(labels == biggest)
     rows, cols = change.shape

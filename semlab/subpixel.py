@@ -249,6 +249,10 @@ def estimate_noise(image, *, flat_quantile: float = 0.6) -> NoiseModel:
             ys.append(float(np.median(d2[sel])) / 0.4549)
     if not ys:
         return NoiseModel(rho=rho)
+    if float(np.mean(ys)) < 0.1:
+        # Below the 8-bit quantisation (1/12 gray level²): a noise-free (e.g. synthetic) image,
+        # whose row differences are scene structure, not noise.
+        return NoiseModel(rho=0.0, variance_at_zero=0.1, variance_slope=0.0, variance_floor=0.1)
     if len(xs) >= 2 and np.ptp(xs) > 1e-6:
         slope = max(float(np.polyfit(xs, ys, 1)[0]), 0.0)
     else:
@@ -310,11 +314,17 @@ def _remap_points(image, xs, ys):
     return out.reshape(-1).astype(np.float64)
 
 
+def _absorb(grad, inside, ind_in, ind_out):
+    """What is left of a derivative once the two region levels have followed it."""
+    mean_in, mean_out = float(grad @ ind_in), float(grad @ ind_out)
+    return grad - inside * (mean_in - mean_out) - mean_out
+
+
 def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=None, gain0=1.0,
                              offset0=0.0, max_iterations: int = 20, tolerance: float = 2e-3,
                              huber: float | None = 2.0, photometric: bool = True, regions=None,
                              exact: bool = True, curvature=None, tukey: bool = False,
-                             freeze: float = 0.01) -> GaussNewtonResult:
+                             template_variance=None, instrument=None) -> GaussNewtonResult:
     """Inverse-compositional Gauss–Newton for a translation with gain/offset (beyond eq. 9).
 
     Minimises ``Σ wᵢ ρ(I(xᵢ + p) − g·T(xᵢ) − o)`` over the template pixels ``xᵢ`` (eq. 2 with a
@@ -344,8 +354,16 @@ def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=N
     huber : float or None
         Huber threshold in robust standard deviations (the spread is the MAD of the first
         iteration's residuals); ``None`` for plain least squares.
-    freeze : float
-        Step (px) below which the ``regions`` gain and offset stop following the image.
+    template_variance : (K,) ndarray, optional
+        Noise variance of ``values``. With ``photometric`` (joint regression), the gain's
+        normal equation is corrected for it (errors in variables: a noisy template's own noise
+        otherwise drags the gain towards 0), ``Σ w T² → Σ w (T² − σ_T²)`` and
+        ``Σ w T r → Σ w (T r + g σ_T²)``.
+    instrument : (K,) ndarray, optional
+        With ``photometric`` (joint regression): a denoised version of ``values`` (e.g. the
+        smoothed template) used as the instrument of the gain's normal equation,
+        ``Σ w T̃ r = 0`` with ``T̃`` in place of ``T`` (instrumental variables): the template's
+        noise then neither biases the gain (errors in variables) nor leaks into the translation.
     tukey : bool
         Once the steps are below 0.05 px, switch from Huber's weights to Tukey's biweight
         (c = 4.685 spreads), which gives grossly wrong pixels (an occluder) no influence at all
@@ -354,7 +372,7 @@ def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=N
         Estimate gain and offset (True) or hold them at ``gain0``, ``offset0``.
     regions : (K,) array_like of bool, optional
         With ``photometric``: take gain and offset from the mean levels of the object pixels
-        (True) and the background pixels (False) while the steps exceed ``freeze`` px, instead of
+        (True) and the background pixels (False) at every iteration, instead of
         regressing the image on the template. Means over hundreds of pixels are unbiased even
         when the template is noisy, whereas the regression's gain shrinks towards 0 when the
         template's noise is comparable with its contrast (errors in variables; low dose).
@@ -411,11 +429,9 @@ def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=N
     samples = None
     for it in range(1, max_iterations + 1):
         samples = sample(p)
-        if two_level and step > freeze:
-            # Gain and offset follow the region means while the translation still moves, then
-            # stay fixed: the means move with p, a coupling that Gauss–Newton's Jacobian does not
-            # model (its steps would then shrink slowly), and that a Jacobian which did model it
-            # would correlate with the noisy template's own noise (a bias at low dose).
+        if two_level:
+            # Gain and offset from the region means at the current position (they match at the
+            # true position, which so stays the fixed point).
             g = (float(samples @ ind_in) - float(samples @ ind_out)) / (t_in - t_out)
             o = float(samples @ ind_out) - g * t_out
             if abs(g) < 1e-6:
@@ -439,16 +455,29 @@ def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=N
         wjx, wjy = w * jx, w * jy
         if joint:
             jac = np.stack([jx, jy, t, np.ones_like(t)], axis=1)
-            jw = jac * w[:, None]
+            inst = jac if instrument is None else np.stack([jx, jy, instrument, np.ones_like(t)], axis=1)
+            jw = inst * w[:, None]
             hess = jw.T @ jac
             rhs = jw.T @ residual
+            if template_variance is not None:
+                correction = float(w @ template_variance)
+                hess[2, 2] -= correction
+                rhs[2] += g * correction
         else:
-            hess = np.array([[wjx @ jx, wjx @ jy], [wjy @ jx, wjy @ jy]])
+            # With two-level photometry, gain and offset move with p: the residual's derivative
+            # is the gradient minus what the levels absorb of it (region indicator, not the noisy
+            # template, carries the levels). Only the step uses it; the estimating equation
+            # Σ w J r = 0 keeps the plain template gradient, uncorrelated with the residual's noise.
+            ex, ey = (_absorb(jx, inside, ind_in, ind_out), _absorb(jy, inside, ind_in, ind_out)) if two_level \
+                else (jx, jy)
+            hess = np.array([[wjx @ ex, wjx @ ey], [wjy @ ex, wjy @ ey]])
             rhs = np.array([wjx @ residual, wjy @ residual])
         if curvature is not None:
             if block is None:
                 gix = _remap_points(curvature[0], px + np.float32(p[0]), py + np.float32(p[1]))
                 giy = _remap_points(curvature[1], px + np.float32(p[0]), py + np.float32(p[1]))
+                if two_level:
+                    gix, giy = _absorb(gix, inside, ind_in, ind_out), _absorb(giy, inside, ind_in, ind_out)
                 block = np.array([[wjx @ gix, wjx @ giy], [wjy @ gix, wjy @ giy]])
                 sym = 0.5 * (block + block.T)
                 if not (np.linalg.det(sym) > 0 and np.trace(sym) > 0):

@@ -155,6 +155,12 @@ class Tracker:
     normal_sigma : float
         ``"ic"``: the Jacobian keeps only the gradient component along the edge normal, taken
         from the template smoothed by this many px (0: keep the whole gradient).
+    inner_px : int
+        ``"ic"``: on the object's side the band reaches this deep (its pixels move with the
+        object and fix its gray level).
+    photometry : {"regression", "regions", "instrument"}
+        ``"ic"``: gain and offset by regression on the template, corrected for the template's
+        noise (errors in variables), or from the mean levels of object and background pixels.
 
     Examples
     --------
@@ -178,7 +184,7 @@ class Tracker:
                  photometric: bool = True, template_frames: int = 20, coarse_factor: int = 4,
                  max_iterations: int = 20, min_score: float | None = None, min_relative_score: float = 0.5,
                  coarse_sigma: float = 1.0, jacobian_sigma: float = 0.7, jacobian_sigma_first: float = 2.0,
-                 normal_sigma: float = 0.0):
+                 normal_sigma: float = 0.0, photometry: str = "regions", inner_px: int = 0):
         if method not in METHODS:
             raise ValueError(f"unknown method {method!r}; choose one of {METHODS}")
         if int(search_size) != search_size or search_size < 16:
@@ -211,6 +217,10 @@ class Tracker:
         self.coarse_sigma = float(coarse_sigma)
         self.jacobian_sigma = float(jacobian_sigma)
         self.normal_sigma = float(normal_sigma)
+        if photometry not in ("regression", "regions", "instrument"):
+            raise ValueError(f"photometry must be 'regression', 'regions' or 'instrument', got {photometry!r}")
+        self.photometry = photometry
+        self.inner_px = int(inner_px)
         self.jacobian_sigma_first = float(jacobian_sigma_first)
         default_min = {"ic": 0.1, "contour": 0.3, "ssd": 0.3, "hb": 0.3}[method]
         self.min_score = default_min if min_score is None else float(min_score)
@@ -240,6 +250,10 @@ class Tracker:
             raise ValueError(f"the ROI {roi} is constant: nothing to track")
         contour = identify_contour_template(patch, **self.template_params)
         band = self._band(contour.mask, self.band_px)
+        if self.method == "ic" and self.inner_px > self.band_px:
+            # The object's inside moves with it: a deeper band on that side pins its gray level
+            # (the photometric nuisance) without taking in background that stays behind.
+            band |= self._band(contour.mask, self.inner_px) & contour.region
         if band.sum() < 10:
             raise ValueError(f"the contour template in ROI {roi} leaves fewer than 10 pixels away from the "
                              "ROI border: enlarge the ROI or move it onto the tip")
@@ -250,7 +264,16 @@ class Tracker:
         self._contour_core = contour.mask & inner
         if self._contour_core.sum() < 5:
             self._contour_core = contour.mask
-        self.noise = estimate_noise(patch) if (self.whiten or self.noise_weights) else NoiseModel()
+        self.noise = estimate_noise(patch)
+        region = contour.region
+        if region.any() and not region.all():
+            contrast = abs(float(patch[region].mean() - patch[~region].mean()))
+            sigma = float(np.sqrt(self.noise.variance(float(patch.mean()))))
+            if contrast < 2.0 * sigma:
+                raise ValueError(f"no object in the ROI {roi}: the contour encloses a contrast of {contrast:.3g} "
+                                 f"gray levels, less than twice the noise ({sigma:.3g}); this is noise, not a probe")
+        if not (self.whiten or self.noise_weights):
+            self.noise = NoiseModel()
         self.template = patch
         self.origin = np.zeros(2)
         self._n_averaged = 1
@@ -308,8 +331,14 @@ class Tracker:
             # Gradients by eq. 8's 5-point mask of the lightly smoothed template: a noisy Jacobian
             # inflates the variance along the weakly constrained direction (along the shaft, only
             # the apex tells x); the curvature then comes from the image (see _fit).
-            # A noisy template needs a smoother Jacobian; the averaged one a sharper one.
-            sigma_j = max(self.jacobian_sigma, self.jacobian_sigma_first / np.sqrt(self._n_averaged))
+            # A noisy template needs a smoother Jacobian; an averaged or clean one a sharper one:
+            # the smoothing grows with the template's noise relative to its contrast.
+            inside = self.contour.region[ys, xs]
+            contrast = abs(float(self._t_values[inside].mean() - self._t_values[~inside].mean())) if (
+                inside.any() and not inside.all()) else 1.0
+            noise = float(np.sqrt(np.mean(self.noise.variance(self._t_values)) / self._n_averaged))
+            sigma_j = float(np.clip(5.0 * noise / max(contrast, 1e-6), self.jacobian_sigma,
+                                    self.jacobian_sigma_first))
             self._sigma_j = sigma_j
             gx, gy = five_point_gradients(cv2.GaussianBlur(tw, (0, 0), sigma_j) if sigma_j > 0 else tw)
             if self.normal_sigma > 0:
@@ -329,6 +358,13 @@ class Tracker:
             self._tws_values = tws[ys, xs].astype(np.float64)
             self._sgx, self._sgy = sgx[ys, xs].astype(np.float64), sgy[ys, xs].astype(np.float64)
             self._inside = self.contour.region[ys, xs]
+            # Noise variance of the (whitened, averaged) template at the band pixels, and the
+            # factor by which the first stage's smoothing reduces it.
+            self._t_var = (1.0 - rho ** 2) * self.noise.variance(self._t_values) / self._n_averaged
+            self._smooth_gain = 1.0 / (4.0 * np.pi * self.coarse_sigma ** 2) if self.coarse_sigma > 0 else 1.0
+            # The instrument for the gain: the template smoothed (its own noise mostly averaged out).
+            self._instrument = cv2.GaussianBlur(tw, (0, 0), 1.5)[ys, xs].astype(np.float64)
+            self._instrument_s = cv2.GaussianBlur(tws, (0, 0), 1.5)[ys, xs].astype(np.float64)
             self._gx, self._gy = gx[ys, xs].astype(np.float64), gy[ys, xs].astype(np.float64)
             if self.noise_weights:
                 level = cv2.GaussianBlur(self.template, (0, 0), 1.0)[ys, xs]
@@ -336,6 +372,9 @@ class Tracker:
                 self._weights = var.min() / var
             else:
                 self._weights = None
+            self._arrays = {k: getattr(self, k) for k in (
+                "_weights", "_inside", "_tws_values", "_sgx", "_sgy", "_tw_values", "_gx", "_gy", "_t_var",
+                "_instrument_s", "_instrument", "_t_values")}
             f = self.coarse_factor
             h, w = self.template.shape
             hc, wc = h - h % f, w - w % f
@@ -412,12 +451,13 @@ class Tracker:
         cx, cy = roi_centre(self.roi)
         return clip_window(cx + shift[0], cy + shift[1], size, size, shape)
 
-    def _band_inside(self, shift, shape, margin=2) -> bool:
-        bx0, by0, bx1, by1 = self._bbox
+    def _band_inside(self, shift, shape, margin=2, fraction=1.0) -> bool:
+        """Whether at least ``fraction`` of the band lies ``margin`` px inside the image at ``shift``."""
         x0, y0 = self.roi[:2]
-        return (x0 + bx0 + shift[0] >= margin and y0 + by0 + shift[1] >= margin
-                and x0 + bx1 - 1 + shift[0] <= shape[1] - 1 - margin
-                and y0 + by1 - 1 + shift[1] <= shape[0] - 1 - margin)
+        px = self._points[:, 0] + x0 + shift[0]
+        py = self._points[:, 1] + y0 + shift[1]
+        inside = (px >= margin) & (py >= margin) & (px <= shape[1] - 1 - margin) & (py <= shape[0] - 1 - margin)
+        return bool(inside.mean() >= fraction)
 
     # ---- "ic"
     def _coarse(self, arr, predicted):
@@ -454,30 +494,45 @@ class Tracker:
         rho = self.noise.rho if self.whiten else 0.0
         cw = whiten_lines(crop, rho)
         pts = self._points + (x0 - cx0, y0 - cy0)
-        common = {"weights": self._weights, "huber": self.huber, "photometric": self.photometric,
-                      "regions": self._inside}
+        arrays = self._arrays
+        # Band pixels that have left the image (the object near its border) drop out.
+        px0, py0 = pts[:, 0] + shift0[0], pts[:, 1] + shift0[1]
+        valid = (px0 >= 3) & (py0 >= 3) & (px0 <= cw.shape[1] - 4) & (py0 <= cw.shape[0] - 4)
+        if not valid.all():
+            if valid.mean() < 0.5 or valid.sum() < 10:
+                raise ValueError("the target has left the image")
+            pts = pts[valid]
+            arrays = {k: (v[valid] if isinstance(v, np.ndarray) else v) for k, v in arrays.items()}
+        two_level = self.photometry == "regions"
+        common = {"weights": arrays["_weights"], "huber": self.huber, "photometric": self.photometric,
+                  "regions": arrays["_inside"] if two_level else None}
+        iv = self.photometry == "instrument"
         if self.coarse_sigma > 0 and robust_start:
             # Stage 1, both images smoothed alike: a wide basin and a smooth cost, so a start a few
             # px off (or a noisy one-frame template) converges to the right minimum.
             smooth = cv2.GaussianBlur(cw, (0, 0), self.coarse_sigma)
-            first = gauss_newton_translation(smooth, pts, self._tws_values, self._sgx, self._sgy, shift0,
+            first = gauss_newton_translation(smooth, pts, arrays["_tws_values"], arrays["_sgx"], arrays["_sgy"], shift0,
                                              gain0=gain0, offset0=offset0, max_iterations=self.max_iterations,
-                                             tolerance=0.02, **common)
+                                             tolerance=0.02, template_variance=None if (two_level or iv) else
+                                             arrays["_t_var"] * self._smooth_gain,
+                                             instrument=arrays["_instrument_s"] if iv else None, **common)
             if first.converged:
                 shift0, gain0, offset0 = first.shift, first.gain, first.offset
         # Stage 2, full resolution: the efficient estimate. A strongly smoothed Jacobian (young
         # template) takes its curvature from the image; a light one is close enough to exact.
         curvature = five_point_gradients(cw) if self._sigma_j > 1.0 else None
-        fit = gauss_newton_translation(cw, pts, self._tw_values, self._gx, self._gy, shift0,
+        fit = gauss_newton_translation(cw, pts, arrays["_tw_values"], arrays["_gx"], arrays["_gy"], shift0,
                                        gain0=gain0, offset0=offset0, max_iterations=self.max_iterations,
-                                       curvature=curvature, **common)
+                                       curvature=curvature,
+                                       template_variance=None if (two_level or iv) else arrays["_t_var"],
+                                       instrument=arrays["_instrument"] if iv else None, **common)
         moved = float(np.max(np.abs(fit.shift - np.asarray(shift0, float)))) if np.all(np.isfinite(fit.shift)) else np.inf
         if moved > margin - 3:
             fit.converged = False
         plain = cv2.remap(crop, (pts[:, 0] + fit.shift[0]).astype(np.float32).reshape(1, -1),
                           (pts[:, 1] + fit.shift[1]).astype(np.float32).reshape(1, -1), cv2.INTER_CUBIC,
                           borderMode=cv2.BORDER_REPLICATE).reshape(-1) if np.isfinite(moved) else None
-        score = weighted_ncc(plain, self._t_values, fit.weights) if plain is not None else 0.0
+        score = weighted_ncc(plain, arrays["_t_values"], fit.weights) if plain is not None else 0.0
         return fit, score
 
     def _threshold(self) -> float:
@@ -510,8 +565,8 @@ class Tracker:
             return self._lost(f"no convergence (score {score:.2f})")
         if score < self._threshold():
             return self._lost(f"no match (score {score:.2f} < {self._threshold():.2f})")
-        if not self._band_inside(fit.shift, arr.shape):
-            return self._lost("the target reaches the image border")
+        if not self._band_inside(fit.shift, arr.shape, fraction=0.5):
+            return self._lost("the target has left the image")
         self.gain, self.offset = fit.gain, fit.offset
         if len(self._scores) < 10:
             self._scores.append(score)

@@ -14,9 +14,22 @@ import pytest
 from scipy.special import ndtr
 
 from semlab.edges import adaptive_canny_thresholds, canny_edges, image_gradients
-from semlab.matching import contour_match, hager_belhumeur_increment, offline_matrix, parabola_peak, ssd_match
+from semlab.matching import (
+    contour_match,
+    hager_belhumeur_increment,
+    offline_matrix,
+    parabola_peak,
+    ssd_match,
+)
 from semlab.metrics import LOSS_PX, summarize_errors, tracking_errors
-from semlab.roi import as_gray_float, check_roi, clip_window, roi_centre, roi_from_click, roi_from_motion
+from semlab.roi import (
+    as_gray_float,
+    check_roi,
+    clip_window,
+    roi_centre,
+    roi_from_click,
+    roi_from_motion,
+)
 from semlab.subpixel import (
     estimate_noise,
     five_point_gradients,
