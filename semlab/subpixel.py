@@ -324,7 +324,7 @@ def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=N
                              offset0=0.0, max_iterations: int = 20, tolerance: float = 2e-3,
                              huber: float | None = 2.0, photometric: bool = True, regions=None,
                              exact: bool = True, curvature=None, tukey: bool = False,
-                             template_variance=None, instrument=None) -> GaussNewtonResult:
+                             template_variance=None, instrument=None, freeze: float = 0.01) -> GaussNewtonResult:
     """Inverse-compositional Gauss–Newton for a translation with gain/offset (beyond eq. 9).
 
     Minimises ``Σ wᵢ ρ(I(xᵢ + p) − g·T(xᵢ) − o)`` over the template pixels ``xᵢ`` (eq. 2 with a
@@ -364,6 +364,8 @@ def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=N
         smoothed template) used as the instrument of the gain's normal equation,
         ``Σ w T̃ r = 0`` with ``T̃`` in place of ``T`` (instrumental variables): the template's
         noise then neither biases the gain (errors in variables) nor leaks into the translation.
+    freeze : float
+        Step (px) below which the ``regions`` gain and offset stop following the image.
     tukey : bool
         Once the steps are below 0.05 px, switch from Huber's weights to Tukey's biweight
         (c = 4.685 spreads), which gives grossly wrong pixels (an occluder) no influence at all
@@ -372,7 +374,8 @@ def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=N
         Estimate gain and offset (True) or hold them at ``gain0``, ``offset0``.
     regions : (K,) array_like of bool, optional
         With ``photometric``: take gain and offset from the mean levels of the object pixels
-        (True) and the background pixels (False) at every iteration, instead of
+        (True) and the background pixels (False), weighted by the robust weights, while the
+        steps exceed ``freeze`` px, instead of
         regressing the image on the template. Means over hundreds of pixels are unbiased even
         when the template is noisy, whereas the regression's gain shrinks towards 0 when the
         template's noise is comparable with its contrast (errors in variables; low dose).
@@ -429,11 +432,20 @@ def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=N
     samples = None
     for it in range(1, max_iterations + 1):
         samples = sample(p)
-        if two_level:
-            # Gain and offset from the region means at the current position (they match at the
-            # true position, which so stays the fixed point).
-            g = (float(samples @ ind_in) - float(samples @ ind_out)) / (t_in - t_out)
-            o = float(samples @ ind_out) - g * t_out
+        if two_level and step > freeze:
+            # Gain and offset follow the region means while the translation still moves, then
+            # stay fixed (the means move with p, a coupling Gauss–Newton does not model). The
+            # means are weighted by the robust weights, so occluders and clutter that fall into
+            # the band do not pull the levels.
+            wi, wo = robust * inside, robust * ~inside
+            swi, swo = float(wi.sum()), float(wo.sum())
+            if swi <= 0 or swo <= 0:
+                break
+            ti, to = float(wi @ t) / swi, float(wo @ t) / swo
+            if ti == to:
+                break
+            g = (float(wi @ samples) / swi - float(wo @ samples) / swo) / (ti - to)
+            o = float(wo @ samples) / swo - g * to
             if abs(g) < 1e-6:
                 break
         residual = samples - (g * t + o)
@@ -468,8 +480,8 @@ def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=N
             # is the gradient minus what the levels absorb of it (region indicator, not the noisy
             # template, carries the levels). Only the step uses it; the estimating equation
             # Σ w J r = 0 keeps the plain template gradient, uncorrelated with the residual's noise.
-            ex, ey = (_absorb(jx, inside, ind_in, ind_out), _absorb(jy, inside, ind_in, ind_out)) if two_level \
-                else (jx, jy)
+            ex, ey = (_absorb(jx, inside, ind_in, ind_out), _absorb(jy, inside, ind_in, ind_out)) if (
+                two_level and step > freeze) else (jx, jy)
             hess = np.array([[wjx @ ex, wjx @ ey], [wjy @ ex, wjy @ ey]])
             rhs = np.array([wjx @ residual, wjy @ residual])
         if curvature is not None:

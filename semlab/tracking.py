@@ -44,6 +44,7 @@ from .matching import contour_match, offline_matrix, parabola_peak, ssd_match
 from .roi import as_gray_float, check_roi, clip_window, roi_centre
 from .subpixel import (
     NoiseModel,
+    _keys_taps,
     estimate_noise,
     five_point_gradients,
     gauss_newton_translation,
@@ -278,12 +279,14 @@ class Tracker:
         self.origin = np.zeros(2)
         self._n_averaged = 1
         self._stack = None
+        self._sum = None
         self.centre0 = np.array(roi_centre(roi))
         self.shift = np.zeros(2)
         self.velocity = np.zeros(2)
         self.gain, self.offset = 1.0, 0.0
         self.lost = False
         self._scores: list[float] = []
+        self._last_prediction_error = np.inf
         self.n_lost = 0
         self._prepare_template()
         self._contour_offset = (0, 0)
@@ -362,9 +365,17 @@ class Tracker:
             # factor by which the first stage's smoothing reduces it.
             self._t_var = (1.0 - rho ** 2) * self.noise.variance(self._t_values) / self._n_averaged
             self._smooth_gain = 1.0 / (4.0 * np.pi * self.coarse_sigma ** 2) if self.coarse_sigma > 0 else 1.0
+            self._stage1_sigmas = (4.0 * self.coarse_sigma, 2.0 * self.coarse_sigma, self.coarse_sigma)
+            stage1 = {}
+            for k, sigma in enumerate(self._stage1_sigmas if self.coarse_sigma > 0 else ()):
+                ts = cv2.GaussianBlur(tw, (0, 0), sigma)
+                s_gx, s_gy = five_point_gradients(ts)
+                stage1[f"_s{k}_values"] = ts[ys, xs].astype(np.float64)
+                stage1[f"_s{k}_gx"], stage1[f"_s{k}_gy"] = s_gx[ys, xs].astype(np.float64), s_gy[ys, xs].astype(np.float64)
             # The instrument for the gain: the template smoothed (its own noise mostly averaged out).
-            self._instrument = cv2.GaussianBlur(tw, (0, 0), 1.5)[ys, xs].astype(np.float64)
-            self._instrument_s = cv2.GaussianBlur(tws, (0, 0), 1.5)[ys, xs].astype(np.float64)
+            iv = self.photometry == "instrument"
+            self._instrument = cv2.GaussianBlur(tw, (0, 0), 1.5)[ys, xs].astype(np.float64) if iv else None
+            self._instrument_s = cv2.GaussianBlur(tws, (0, 0), 1.5)[ys, xs].astype(np.float64) if iv else None
             self._gx, self._gy = gx[ys, xs].astype(np.float64), gy[ys, xs].astype(np.float64)
             if self.noise_weights:
                 level = cv2.GaussianBlur(self.template, (0, 0), 1.0)[ys, xs]
@@ -375,6 +386,7 @@ class Tracker:
             self._arrays = {k: getattr(self, k) for k in (
                 "_weights", "_inside", "_tws_values", "_sgx", "_sgy", "_tw_values", "_gx", "_gy", "_t_var",
                 "_instrument_s", "_instrument", "_t_values")}
+            self._arrays.update(stage1)
             f = self.coarse_factor
             h, w = self.template.shape
             hc, wc = h - h % f, w - w % f
@@ -429,6 +441,7 @@ class Tracker:
             return self._lost(f"{err}")
 
     def _lost(self, reason: str) -> TrackResult:
+        self._last_prediction_error = np.inf
         self.lost = True
         self.n_lost += 1
         self.velocity[:] = 0.0
@@ -508,16 +521,20 @@ class Tracker:
                   "regions": arrays["_inside"] if two_level else None}
         iv = self.photometry == "instrument"
         if self.coarse_sigma > 0 and robust_start:
-            # Stage 1, both images smoothed alike: a wide basin and a smooth cost, so a start a few
-            # px off (or a noisy one-frame template) converges to the right minimum.
-            smooth = cv2.GaussianBlur(cw, (0, 0), self.coarse_sigma)
-            first = gauss_newton_translation(smooth, pts, arrays["_tws_values"], arrays["_sgx"], arrays["_sgy"], shift0,
-                                             gain0=gain0, offset0=offset0, max_iterations=self.max_iterations,
-                                             tolerance=0.02, template_variance=None if (two_level or iv) else
-                                             arrays["_t_var"] * self._smooth_gain,
-                                             instrument=arrays["_instrument_s"] if iv else None, **common)
-            if first.converged:
-                shift0, gain0, offset0 = first.shift, first.gain, first.offset
+            # Stage 1, coarse to fine, both images smoothed alike (σ = 4, 2, 1 × coarse_sigma): a
+            # wide basin and a smooth cost, so a start several px off (a bad prediction, a coarse
+            # peak slid along a straight edge) or a noisy one-frame template still converges.
+            moved_total = np.zeros(2)
+            for k, sigma in enumerate(self._stage1_sigmas):
+                smooth = cv2.GaussianBlur(cw, (0, 0), sigma)
+                values, sgx, sgy = (arrays[f"_s{k}_values"], arrays[f"_s{k}_gx"], arrays[f"_s{k}_gy"])
+                first = gauss_newton_translation(smooth, pts, values, sgx, sgy, shift0, gain0=gain0, offset0=offset0,
+                                                 max_iterations=self.max_iterations, tolerance=0.02,
+                                                 weights=arrays["_weights"], huber=self.huber,
+                                                 photometric=self.photometric, regions=arrays["_inside"])
+                if first.converged and abs(first.gain) > 0.05:
+                    moved_total += first.shift - shift0
+                    shift0, gain0, offset0 = first.shift, first.gain, first.offset
         # Stage 2, full resolution: the efficient estimate. A strongly smoothed Jacobian (young
         # template) takes its curvature from the image; a light one is close enough to exact.
         curvature = five_point_gradients(cw) if self._sigma_j > 1.0 else None
@@ -536,31 +553,32 @@ class Tracker:
         return fit, score
 
     def _threshold(self) -> float:
-        if len(self._scores) >= 3:
+        if self._scores:
             return max(self.min_score, self.min_relative_score * float(np.median(self._scores)))
         return self.min_score
 
     def _update_ic(self, arr) -> TrackResult:
         predicted = self.shift + self.velocity
-        coarse = self._coarse(arr, predicted)
-        # The coarse peak is good to a coarse pixel or two (less along a straight shaft, whose
-        # correlation peak is a ridge); the constant-velocity prediction is better whenever it
-        # agrees with it, which saves Gauss–Newton iterations.
-        agree = not self.lost and float(np.max(np.abs(coarse - predicted))) <= 2 * self.coarse_factor
-        start = predicted if agree else coarse
-        # While tracking steadily with a good template, the prediction is within a fraction of
-        # a pixel and the smoothed first stage would only cost time.
-        steady = agree and self._stack is None and float(np.hypot(*self.velocity)) < 2.0
-        fit, score = self._fit(arr, start, self.gain, self.offset, robust_start=not steady)
-        if steady and not fit.converged:
-            fit, score = self._fit(arr, start, self.gain, self.offset)
-        if not fit.converged:
-            # A wrong coarse peak (e.g. clutter) or a bad start: try the other starting point.
-            other = coarse if agree else (predicted if not self.lost else None)
-            if other is not None:
-                fit2, score2 = self._fit(arr, other, self.gain, self.offset)
-                if fit2.converged:
-                    fit, score = fit2, score2
+        fit, score, good = None, 0.0, False
+        typical = 0.9 * float(np.median(self._scores)) if self._scores else 1.0
+        if not self.lost:
+            # The constant-velocity prediction first: while tracking it is within a fraction of
+            # a pixel (then the smoothed first stage is skipped) or a few px (a change of speed).
+            steady = self._last_prediction_error < 1.0
+            fit, score = self._fit(arr, predicted, self.gain, self.offset, robust_start=not steady)
+            if steady and not fit.converged:
+                fit, score = self._fit(arr, predicted, self.gain, self.offset)
+            good = fit.converged and score >= max(self._threshold(), typical)
+        if not good:
+            # A jump, a poor match or a lost target: the coarse search over the window (the
+            # whole image when lost), and keep the better match, the one nearer the prediction
+            # when about as good.
+            coarse = self._coarse(arr, predicted)
+            fit2, score2 = self._fit(arr, coarse, self.gain, self.offset)
+            if fit is None or (fit2.converged and (not fit.converged or score2 > score + 0.05 or (
+                    score2 >= score - 0.05
+                    and np.hypot(*(fit2.shift - predicted)) < np.hypot(*(fit.shift - predicted))))):
+                fit, score = fit2, score2
         if not fit.converged:
             return self._lost(f"no convergence (score {score:.2f})")
         if score < self._threshold():
@@ -572,6 +590,7 @@ class Tracker:
             self._scores.append(score)
         if self._stack is not None and fit.inliers > 0.8 and score >= 0.8 * np.median(self._scores):
             self._average_into_template(arr, fit)
+        self._last_prediction_error = float(np.hypot(*(fit.shift - predicted)))
         return self._accept(fit.shift, score)
 
     def _average_into_template(self, arr, fit):
@@ -598,10 +617,13 @@ class Tracker:
             self._stack = None
         else:
             patch = self._registered_patch(area, (ax0, ay0), fit.shift, fit.gain, fit.offset)
-            self.template = ((self.template * (n - 1) + patch) / n).astype(np.float32)
+            self._sum = (self._sum if self._sum is not None else self.template.astype(np.float64)) + patch
+            if n & (n - 1):
+                return  # the template is refreshed when the count doubles (2, 4, 8, ...): cheaper
+            self.template = (self._sum / n).astype(np.float32)
             self._prepare_template()
             area0, at0, shift0, gain0, offset0 = self._stack[0]
-            ref, _ = self._fit(area0, shift0, gain0, offset0, at=at0)
+            ref, _ = self._fit(area0, shift0, gain0, offset0, at=at0, robust_start=False)
             if ref.converged:
                 self._stack[0][2:] = [ref.shift.copy(), ref.gain, ref.offset]
                 self.origin = ref.shift.copy()
@@ -612,9 +634,14 @@ class Tracker:
         # The same exact Keys interpolation as the registration: another kernel (OpenCV's
         # a = −0.75, positions rounded to 1/32 px) would shift sharp edges by a few hundredths
         # of a pixel at every averaging step, and the template would drift.
-        ys, xs = np.mgrid[0:h, 0:w]
-        grid = np.stack([xs.ravel() + x0 - at[0], ys.ravel() + y0 - at[1]], axis=1)
-        patch = sample_shifted_filtered(area, grid, shift).reshape(h, w).astype(np.float32)
+        px, py = x0 + shift[0] - at[0], y0 + shift[1] - at[1]
+        ix, iy = int(np.floor(px)), int(np.floor(py))
+        wx, wy = _keys_taps(px - ix), _keys_taps(py - iy)
+        filtered = cv2.sepFilter2D(np.asarray(area, np.float32), -1, wx.reshape(1, 4), wy.reshape(4, 1),
+                                   anchor=(1, 1), borderType=cv2.BORDER_REPLICATE)
+        patch = filtered[iy:iy + h, ix:ix + w]
+        if patch.shape != (h, w):
+            raise ValueError("the registered patch leaves the stored area")
         rho = self.noise.rho if self.whiten else 0.0
         # Gain and offset were estimated on whitened images: a constant c whitens to (1 − ρ)·c.
         return (patch - offset / (1.0 - rho)) / gain
@@ -624,7 +651,7 @@ class Tracker:
             total, count = np.zeros_like(self.template), 0
             for item in self._stack:
                 area, at, shift, gain, offset = item
-                ref, _ = self._fit(area, shift, gain, offset, at=at)
+                ref, _ = self._fit(area, shift, gain, offset, at=at, robust_start=False)
                 if ref.converged:
                     item[2:] = [ref.shift.copy(), ref.gain, ref.offset]
                 total += self._registered_patch(area, at, item[2], item[3], item[4])
