@@ -34,6 +34,13 @@ _EXPORTS = {
     "fit_hysteresis": "semlab.hysteresis",
     "step_response": "semlab.control",
     "step_metrics": "semlab.control",
+    "move_to": "semlab.control",
+    "drive_voltages": "semlab.control",
+    "characterise_creep": "semlab.hysteresis",
+    "fit_creep": "semlab.hysteresis",
+    "CreepModel": "semlab.hysteresis",
+    "PolynomialHysteresis": "semlab.hysteresis",
+    "PIHysteresis": "semlab.hysteresis",
     "PID": "semlab.control",
     "VisualServo": "semlab.control",
     # data in and out
