@@ -3,14 +3,18 @@
 Methods
 -------
 ``"ic"`` (the default of :class:`Tracker`)
-    Beyond the paper, and measured best (``benchmarks/bench_tracking.py``): a coarse masked
-    normalised-correlation search at quarter resolution inside the 300×300 window, then
-    inverse-compositional Gauss–Newton on the contour band (the pixels within ``band_px`` of the
-    contour template, where nearly all the positional information is), bicubic interpolation,
-    gain and offset in the model (gray-level fluctuation, charging), Huber weights (occlusion,
-    clutter), the image whitened along the scan line and weighted by the shot-noise variance
-    (both estimated from the first frame), and a template averaged over the first registered
-    frames (a one-frame template doubles the variance of every estimate).
+    Beyond the paper, and measured best (``benchmarks/bench_tracking.py``): inverse-compositional
+    Gauss–Newton (eq. 2 with the paper's offline matrix ``M₀`` of eqs. 4-5 as its Jacobian) on the
+    contour band — the pixels within ``band_px`` of the contour template, where nearly all the
+    positional information is — started from the constant-velocity prediction and, when that
+    fails, from a coarse masked normalised-correlation search at quarter resolution (the whole
+    image after a loss), through a coarse-to-fine smoothed stage; exact Keys bicubic
+    interpolation; gain and offset from the object and background levels (gray-level
+    fluctuation, charging); Huber weights (occlusion, clutter); the image whitened along the scan
+    line and weighted by the shot-noise variance (both estimated from the first frame); a
+    Jacobian smoothed in proportion to the template's noise; and a template averaged over the
+    first registered frames with frame 0 re-registered against it as the origin (a one-frame
+    template doubles the variance of every estimate).
 ``"contour"`` (the default of :func:`track`, as the contract fixes it)
     The paper's method: in a 300×300 window around the last position, Gaussian smoothing and
     adaptive-threshold Canny (eq. 10), the contour-template match (score from the template's
