@@ -21,6 +21,7 @@ import argparse
 import math
 import os
 import time
+import warnings
 
 import numpy as np
 import pandas as pd
@@ -71,7 +72,9 @@ def at_b(seq, track):
     # includes the manipulator's own scatter, which the simulated piezo has too).
     visits = np.split(dwell.to_numpy(), np.nonzero(np.diff(dwell.to_numpy()) > 1)[0] + 1)
     last = [v[-1] for v in visits]
-    return float(np.nanstd(error, ddof=1)), float(np.nanstd(track.set_index("frame").loc[last, "x"], ddof=1))
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # a tracker lost at every B visit: NaN
+        return float(np.nanstd(error, ddof=1)), float(np.nanstd(track.set_index("frame").loc[last, "x"], ddof=1))
 
 
 def duel(seq, repeats=3):
