@@ -183,14 +183,15 @@ def _param_arg(text: str):
 
 
 def _tracker_methods() -> tuple[tuple[str, ...], str]:
-    """Methods and default of semlab.tracking.track, read lazily (the module may be absent)."""
-    try:
-        import inspect
+    """Methods of semlab.tracking and the best measured one (``Tracker()``'s default), the CLI's default.
 
+    ``semlab.track`` keeps the paper's ``"contour"`` as its default by contract; a command run on a
+    recording should use the method that measured best (``benchmarks/bench_tracking.py``).
+    """
+    try:
         from semlab import tracking
 
-        default = inspect.signature(tracking.track).parameters["method"].default
-        return tuple(tracking.METHODS), default
+        return tuple(tracking.METHODS), tracking.DEFAULT_METHOD
     except (ImportError, AttributeError, KeyError):  # pragma: no cover - tracker not importable
         return ("ic", "contour", "ssd"), "ic"
 
