@@ -253,7 +253,9 @@ class Tracker:
         patch = image[y0:y0 + h, x0:x0 + w].copy()
         if float(patch.max() - patch.min()) <= 0:
             raise ValueError(f"the ROI {roi} is constant: nothing to track")
-        contour = identify_contour_template(patch, **self.template_params)
+        # The frame's own gray levels (uint8 as they are), so a manual threshold means the same
+        # here as in identify_contour_template and the TemplateExplorer.
+        contour = identify_contour_template(np.asarray(frame)[y0:y0 + h, x0:x0 + w], **self.template_params)
         band = self._band(contour.mask, self.band_px)
         if self.method == "ic" and self.inner_px > self.band_px:
             # The object's inside moves with it: a deeper band on that side pins its gray level
