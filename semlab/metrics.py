@@ -178,9 +178,19 @@ def run_tracker(tracker, frames, roi) -> tuple[pd.DataFrame, float]:
     Returns
     -------
     (pandas.DataFrame, float)
-        ``frame, x, y, score, ok`` per frame, and the mean wall time of ``update`` in ms.
+        ``frame, x, y, score, ok`` per frame, and the mean wall time of ``update`` in ms. When the
+        tracker refuses to start (``init`` raises ``ValueError``, e.g. no object above the noise in
+        the ROI), every row is ``ok=False`` with NaN position, the reason is kept in
+        ``df.attrs["init_error"]`` and the time is NaN: in a sweep a refusal counts as a loss.
     """
-    first = tracker.init(frames[0], roi)
+    try:
+        first = tracker.init(frames[0], roi)
+    except ValueError as err:
+        nan = float("nan")
+        df = pd.DataFrame([(i, nan, nan, 0.0, False) for i in range(len(frames))],
+                          columns=["frame", "x", "y", "score", "ok"])
+        df.attrs["init_error"] = str(err)
+        return df, nan
     rows = [(0, first.x, first.y, first.score, first.ok)]
     t0 = time.perf_counter()
     for i in range(1, len(frames)):

@@ -279,3 +279,17 @@ def test_a_gain_and_offset_change_does_not_move_the_answer(gain, offset, dx):
 def test_result_frame_is_pandas():
     df = track(frames_for([(0, 0), (1, 1)]), ROI, method="contour")
     assert isinstance(df, pd.DataFrame)
+
+
+def test_run_tracker_counts_a_refused_start_as_lost_frames():
+    """A sweep must not crash when a tracker refuses an ROI: every frame is flagged instead."""
+    import numpy as np
+
+    from semlab.metrics import run_tracker
+    from semlab.tracking import Tracker
+
+    rng = np.random.default_rng(0)
+    frames = rng.normal(100, 20, size=(4, 120, 120)).clip(0, 255).astype(np.uint8)  # pure noise
+    df, ms = run_tracker(Tracker(), frames, (10, 10, 80, 80))
+    assert len(df) == 4 and not df.ok.any() and df.x.isna().all()
+    assert "init_error" in df.attrs and np.isnan(ms)
