@@ -14,10 +14,7 @@ Methods
     line and weighted by the shot-noise variance (both estimated from the first frame); a
     Jacobian smoothed in proportion to the template's noise; and a template averaged over the
     first registered frames with frame 0 re-registered against it as the origin (a one-frame
-    template doubles the variance of every estimate). When Gauss–Newton fails near the
-    prediction (an edge's contrast vanishing at contact, a brightness jump), a masked
-    normalised correlation of the object's neighbourhood within 24 px of the prediction
-    (contrast-invariant) re-acquires it, and Gauss–Newton restarts from there.
+    template doubles the variance of every estimate).
 ``"contour"`` (the default of :func:`track`, as the contract fixes it)
     The paper's method: in a 300×300 window around the last position, Gaussian smoothing and
     adaptive-threshold Canny (eq. 10), the contour-template match (score from the template's
@@ -588,12 +585,6 @@ class Tracker:
                     score2 >= score - 0.05
                     and np.hypot(*(fit2.shift - predicted)) < np.hypot(*(fit.shift - predicted))))):
                 fit, score = fit2, score2
-        if not self.lost and (not fit.converged or score < self._threshold()):
-            # The appearance changed (an edge's contrast vanished at contact, a brightness jump):
-            # re-acquire near the prediction by a contrast-invariant masked correlation.
-            found = self._reacquire(arr, predicted)
-            if found is not None:
-                return found
         if not fit.converged:
             return self._lost(f"no convergence (score {score:.2f})")
         if score < self._threshold():
@@ -607,51 +598,6 @@ class Tracker:
             self._average_into_template(arr, fit)
         self._last_prediction_error = float(np.hypot(*(fit.shift - predicted)))
         return self._accept(fit.shift, score)
-
-    def _reacquire(self, arr, predicted, radius=24, sigma=1.5, min_ncc=0.6):
-        """Fallback when Gauss–Newton fails near the prediction: the object's neighbourhood
-        (its region dilated by 4 px, so static surroundings in the ROI count little) matched by
-        masked normalised correlation of the smoothed images within ``radius`` px of the
-        prediction, with a parabola peak. Normalised correlation ignores gain and offset (a
-        brightness jump) and degrades gracefully when one edge loses its contrast (contact).
-        Gauss–Newton restarted from there with the correlation's gain and offset refines it when
-        it converges nearby. Returns the accepted result or None."""
-        x0, y0, w, h = self.roi
-        sx, sy = int(round(predicted[0])), int(round(predicted[1]))
-        wx0, wy0 = x0 + sx - radius, y0 + sy - radius
-        if wx0 < 0 or wy0 < 0 or wx0 + w + 2 * radius > arr.shape[1] or wy0 + h + 2 * radius > arr.shape[0]:
-            return None
-        window = cv2.GaussianBlur(_crop(arr, wx0, wy0, wx0 + w + 2 * radius, wy0 + h + 2 * radius), (0, 0), sigma)
-        tmpl = cv2.GaussianBlur(self.template, (0, 0), sigma)
-        kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (9, 9))
-        mask = cv2.dilate(self.contour.region.astype(np.uint8), kernel) > 0
-        if mask.sum() < 10 or mask.all() or np.ptp(tmpl[mask]) <= 0:
-            return None
-        scores = cv2.matchTemplate(window, tmpl, cv2.TM_CCOEFF_NORMED, mask=mask.astype(np.float32))
-        scores = np.nan_to_num(scores, nan=-1.0, posinf=-1.0, neginf=-1.0)
-        _, peak, _, (ix, iy) = cv2.minMaxLoc(scores)
-        if peak < min_ncc or not (0 < ix < scores.shape[1] - 1 and 0 < iy < scores.shape[0] - 1):
-            return None
-        px, py = parabola_peak(scores, ix, iy)
-        shift = np.array([wx0 + px - x0, wy0 + py - y0])
-        # Gain and offset of the match (whitened units: a constant c whitens to (1 − ρ)·c).
-        ix_, iy_ = int(round(px)), int(round(py))
-        a = window[iy_:iy_ + h, ix_:ix_ + w][mask].astype(np.float64)
-        b = tmpl[mask].astype(np.float64)
-        gain = float(np.cov(a, b)[0, 1] / np.var(b, ddof=1))
-        rho = self.noise.rho if self.whiten else 0.0
-        offset = (1.0 - rho) * float(a.mean() - gain * b.mean())
-        try:
-            fit, score = self._fit(arr, shift, gain, offset)
-        except (ValueError, np.linalg.LinAlgError):
-            fit, score = None, 0.0
-        if (fit is not None and fit.converged and score >= self._threshold()
-                and np.hypot(*(fit.shift - shift)) <= 1.5):
-            self.gain, self.offset = fit.gain, fit.offset
-            return self._accept(fit.shift, score)
-        self.gain, self.offset = gain, offset
-        self._last_prediction_error = np.inf
-        return self._accept(shift, float(peak))
 
     def _average_into_template(self, arr, fit):
         """Running mean of the registered, photometrically normalised ROI (a less noisy template).
