@@ -14,7 +14,11 @@ Methods
     line and weighted by the shot-noise variance (both estimated from the first frame); a
     Jacobian smoothed in proportion to the template's noise; and a template averaged over the
     first registered frames with frame 0 re-registered against it as the origin (a one-frame
-    template doubles the variance of every estimate).
+    template doubles the variance of every estimate). When Gauss–Newton fails both from the
+    prediction and from the coarse search (an edge's contrast vanishing at contact with a
+    sample, a brightness jump), a masked normalised correlation of the object's neighbourhood
+    over the whole search window — blind to gain and offset — re-acquires it if its peak stands
+    out, and Gauss–Newton restarts from there.
 ``"contour"`` (the default of :func:`track`, as the contract fixes it)
     The paper's method: in a 300×300 window around the last position, Gaussian smoothing and
     adaptive-threshold Canny (eq. 10), the contour-template match (score from the template's
@@ -585,6 +589,12 @@ class Tracker:
                     score2 >= score - 0.05
                     and np.hypot(*(fit2.shift - predicted)) < np.hypot(*(fit.shift - predicted))))):
                 fit, score = fit2, score2
+        if not self.lost and (not fit.converged or score < self._threshold()):
+            # The appearance changed (an edge's contrast vanished at contact, a brightness
+            # jump): the contrast-invariant correlation of the object over the whole window.
+            found = self._reacquire(arr, predicted)
+            if found is not None:
+                return found
         if not fit.converged:
             return self._lost(f"no convergence (score {score:.2f})")
         if score < self._threshold():
@@ -598,6 +608,80 @@ class Tracker:
             self._average_into_template(arr, fit)
         self._last_prediction_error = float(np.hypot(*(fit.shift - predicted)))
         return self._accept(fit.shift, score)
+
+    def _reacquire(self, arr, predicted, sigma=1.5, min_ncc=0.6, min_margin=0.05):
+        """Fallback when Gauss–Newton fails: where in the search window the object looks most alike.
+
+        The object and its immediate surroundings (its region dilated by 4 px, so static
+        background in the ROI counts little) are matched by masked normalised correlation of
+        the smoothed images — blind to gain and offset (a brightness jump) and degrading
+        gracefully when one edge loses its contrast (contact with a sample) — over the whole
+        search window, at half resolution and then at full resolution around the peak. The
+        best match over the window, not the one nearest the prediction: near the prediction a
+        probe that jumped along its own shaft leaves shaft behind, which correlates well too.
+        The peak must stand out from the best match more than a few px away (``min_margin``),
+        or the answer is ambiguous and the frame stays lost. Gauss–Newton restarted there
+        refines it when it converges nearby; otherwise the correlation peak is the answer.
+
+        Returns
+        -------
+        TrackResult or None
+            The accepted result, or None (nothing found well enough).
+        """
+        x0, y0, w, h = self.roi
+        wx, wy, ww, wh = self._window(arr.shape, predicted)
+        if ww < w + 4 or wh < h + 4:
+            return None
+        window = cv2.GaussianBlur(_crop(arr, wx, wy, wx + ww, wy + wh), (0, 0), sigma)
+        tmpl = cv2.GaussianBlur(self.template, (0, 0), sigma)
+        kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (9, 9))
+        mask = cv2.dilate(self.contour.region.astype(np.uint8), kernel) > 0
+        mask &= self._inner(mask.shape, 2)
+        if mask.sum() < 10 or mask.all() or np.ptp(tmpl[mask]) <= 0:
+            return None
+        # Half resolution over the window (a quarter of the work), full resolution near its peak.
+        half = cv2.resize(window, (ww // 2, wh // 2), interpolation=cv2.INTER_AREA)
+        th, tw_ = h // 2, w // 2
+        tmpl_half = cv2.resize(tmpl[:2 * th, :2 * tw_], (tw_, th), interpolation=cv2.INTER_AREA)
+        mask_half = cv2.resize(mask[:2 * th, :2 * tw_].astype(np.float32), (tw_, th), interpolation=cv2.INTER_AREA)
+        coarse = cv2.matchTemplate(half, tmpl_half, cv2.TM_CCOEFF_NORMED, mask=(mask_half > 0.5).astype(np.float32))
+        coarse = np.nan_to_num(coarse, nan=-1.0, posinf=-1.0, neginf=-1.0)
+        _, peak, _, (cx, cy) = cv2.minMaxLoc(coarse)
+        # The runner-up: the best other local maximum more than 8 px away (a ridge through the
+        # peak, e.g. along an edge, is the same peak's shoulder, not a rival).
+        yy, xx = np.ogrid[:coarse.shape[0], :coarse.shape[1]]
+        local_max = coarse >= cv2.dilate(coarse, np.ones((5, 5), np.uint8))
+        rivals = local_max & ((np.abs(xx - cx) > 4) | (np.abs(yy - cy) > 4))
+        runner_up = float(coarse[rivals].max()) if rivals.any() else -1.0
+        if peak < min_ncc or peak - runner_up < min_margin:
+            return None
+        r = 3
+        fx0, fy0 = max(2 * cx - r, 0), max(2 * cy - r, 0)
+        fx1, fy1 = min(2 * cx + r + w, ww), min(2 * cy + r + h, wh)
+        fine = cv2.matchTemplate(window[fy0:fy1, fx0:fx1], tmpl, cv2.TM_CCOEFF_NORMED, mask=mask.astype(np.float32))
+        fine = np.nan_to_num(fine, nan=-1.0, posinf=-1.0, neginf=-1.0)
+        _, peak, _, (ix, iy) = cv2.minMaxLoc(fine)
+        if peak < min_ncc or not (0 < ix < fine.shape[1] - 1 and 0 < iy < fine.shape[0] - 1):
+            return None
+        px, py = parabola_peak(fine, ix, iy)
+        shift = np.array([wx + fx0 + px - x0, wy + fy0 + py - y0])
+        # Gain and offset of the match (whitened units: a constant c whitens to (1 − ρ)·c).
+        a = window[fy0 + iy:fy0 + iy + h, fx0 + ix:fx0 + ix + w][mask].astype(np.float64)
+        b = tmpl[mask].astype(np.float64)
+        gain = float(np.cov(a, b)[0, 1] / np.var(b, ddof=1))
+        rho = self.noise.rho if self.whiten else 0.0
+        offset = (1.0 - rho) * float(a.mean() - gain * b.mean())
+        try:
+            fit, score = self._fit(arr, shift, gain, offset)
+        except (ValueError, np.linalg.LinAlgError):
+            fit, score = None, 0.0
+        self._last_prediction_error = np.inf
+        if (fit is not None and fit.converged and score >= self._threshold()
+                and np.hypot(*(fit.shift - shift)) <= 1.5):
+            self.gain, self.offset = fit.gain, fit.offset
+            return self._accept(fit.shift, score)
+        self.gain, self.offset = gain, offset
+        return self._accept(shift, float(peak))
 
     def _average_into_template(self, arr, fit):
         """Running mean of the registered, photometrically normalised ROI (a less noisy template).

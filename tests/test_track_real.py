@@ -64,11 +64,14 @@ def test_needle_followed_while_it_approaches(frames, reference):
         assert err <= 1.5, f"frame {k}: {err:.2f} px from the consensus"
 
 
-@pytest.mark.xfail(strict=True, reason="known limitation: at contact (frame 5 on) the dark gap between needle and "
-                   "lamella closes and the brightness jumps; the default tracker loses the needle (ok=False)")
 def test_needle_followed_through_contact(frames, reference):
-    # The full requirement: no loss flag in all 11 frames, and frame 5 within 1.5 px.
+    # The full requirement: no loss flag in all 11 frames, and frame 5 (contact) within
+    # 1.5 px of the consensus. From frame 6 the brightness jumps and the needle, now touching the
+    # lamella, is lifted: it keeps moving, but by less than its approach steps (< 10 px per frame),
+    # so a jump beyond that between frames would be a false lock, not the needle.
     res = _run(frames).set_index("frame")
-    assert res["ok"].all()
+    assert res["ok"].all(), f"frames flagged lost: {res.index[~res['ok']].tolist()}"
     ref = reference.set_index("frame")
     assert np.hypot(res.loc[5, "dx"] - ref.loc[5, "dx"], res.loc[5, "dy"] - ref.loc[5, "dy"]) <= 1.5
+    steps = np.hypot(np.diff(res["dx"].to_numpy()), np.diff(res["dy"].to_numpy()))
+    assert steps[5:].max() < 10.0, f"frame-to-frame steps after contact: {np.round(steps[5:], 2)}"
