@@ -170,6 +170,11 @@ class Tracker:
     photometry : {"regression", "regions", "instrument"}
         ``"ic"``: gain and offset by regression on the template, corrected for the template's
         noise (errors in variables), or from the mean levels of object and background pixels.
+    consistency_cut : float or None
+        ``"ic"``: when the averaged template is built, band pixels whose mean over the
+        registered frames taken near the start differs by more than this many standard errors
+        from their mean over the frames taken after the object moved are static background, not
+        object, and get no weight (None: keep all).
 
     Examples
     --------
@@ -193,7 +198,8 @@ class Tracker:
                  photometric: bool = True, template_frames: int = 20, coarse_factor: int = 4,
                  max_iterations: int = 20, min_score: float | None = None, min_relative_score: float = 0.5,
                  coarse_sigma: float = 1.0, jacobian_sigma: float = 0.7, jacobian_sigma_first: float = 2.0,
-                 normal_sigma: float = 0.0, photometry: str = "regions", inner_px: int = 0):
+                 normal_sigma: float = 0.0, photometry: str = "regions", inner_px: int = 0,
+                 consistency_cut: float | None = 6.0):
         if method not in METHODS:
             raise ValueError(f"unknown method {method!r}; choose one of {METHODS}")
         if int(search_size) != search_size or search_size < 16:
@@ -231,6 +237,9 @@ class Tracker:
         self.photometry = photometry
         self.inner_px = int(inner_px)
         self.jacobian_sigma_first = float(jacobian_sigma_first)
+        if consistency_cut is not None and not consistency_cut > 0:
+            raise ValueError(f"consistency_cut must be > 0 or None, got {consistency_cut!r}")
+        self.consistency_cut = consistency_cut
         default_min = {"ic": 0.1, "contour": 0.3, "ssd": 0.3, "hb": 0.3}[method]
         self.min_score = default_min if min_score is None else float(min_score)
         self.min_relative_score = float(min_relative_score)
@@ -288,6 +297,7 @@ class Tracker:
         self.template = patch
         self.origin = np.zeros(2)
         self._n_averaged = 1
+        self._consistency = None
         self._stack = None
         self._sum = None
         self.centre0 = np.array(roi_centre(roi))
@@ -390,13 +400,14 @@ class Tracker:
             if self.noise_weights:
                 level = cv2.GaussianBlur(self.template, (0, 0), 1.0)[ys, xs]
                 var = self.noise.variance(level)
-                self._weights = var.min() / var
+                self._base_weights = var.min() / var
             else:
-                self._weights = None
+                self._base_weights = None
             self._arrays = {k: getattr(self, k) for k in (
-                "_weights", "_inside", "_tws_values", "_sgx", "_sgy", "_tw_values", "_gx", "_gy", "_t_var",
+                "_inside", "_tws_values", "_sgx", "_sgy", "_tw_values", "_gx", "_gy", "_t_var",
                 "_instrument_s", "_instrument", "_t_values")}
             self._arrays.update(stage1)
+            self._apply_weights()
             f = self.coarse_factor
             h, w = self.template.shape
             hc, wc = h - h % f, w - w % f
@@ -738,18 +749,59 @@ class Tracker:
 
     def _rebuild_template(self, passes=1):
         for _ in range(passes):
-            total, count = np.zeros_like(self.template), 0
+            patches = []
             for item in self._stack:
                 area, at, shift, gain, offset = item
                 ref, _ = self._fit(area, shift, gain, offset, at=at, robust_start=False)
                 if ref.converged:
                     item[2:] = [ref.shift.copy(), ref.gain, ref.offset]
-                total += self._registered_patch(area, at, item[2], item[3], item[4])
-                count += 1
-            self.template = (total / count).astype(np.float32)
+                patches.append(self._registered_patch(area, at, item[2], item[3], item[4]))
+            patches = np.stack(patches)
+            self.template = patches.mean(axis=0).astype(np.float32)
+            self._consistency = (self._consistency_weights(patches, [item[2] for item in self._stack],
+                                                           self.consistency_cut)
+                                 if self.consistency_cut is not None else None)
             self._prepare_template()
         # The origin: where frame 0 (the first item) sits against the new template.
         self.origin = np.asarray(self._stack[0][2], float).copy()
+
+    def _consistency_weights(self, patches, shifts, cut):
+        """Band pixels that do not move with the object get no weight.
+
+        Registered on the object, the stacked frames agree wherever the pixels belong to it, up to
+        noise, wherever the object was. A static background feature next to it (a particle beside
+        the shaft) is there in the frames taken with the object where it started and gone in those
+        taken after it moved. So each band pixel's mean over the frames within 1 px of the start
+        is compared with its mean over the frames more than 3 px away (Welch's t); where the
+        difference exceeds ``cut`` standard errors, the pixel (and its neighbours: a feature is a
+        few px across) is background: kept in the template, it would pull the object back to
+        where the template was taken. Without frames in both groups (the object stood still)
+        nothing is flagged.
+        """
+        moved = np.hypot(*(np.asarray(shifts, float) - np.asarray(shifts[0], float)).T)
+        near, far = moved < 1.0, moved > 3.0
+        if near.sum() < 3 or far.sum() < 3:
+            return None
+        ys, xs = np.nonzero(self.band)
+        values = patches[:, ys, xs].astype(np.float64)
+        a, b = values[near], values[far]
+        se = np.sqrt(a.var(axis=0, ddof=1) / len(a) + b.var(axis=0, ddof=1) / len(b))
+        t = np.abs(a.mean(axis=0) - b.mean(axis=0)) / np.maximum(se, 1e-9)
+        flagged = np.zeros(self.band.shape, np.uint8)
+        flagged[ys[t > cut], xs[t > cut]] = 1
+        flagged = cv2.dilate(flagged, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5)))
+        keep = flagged[ys, xs] == 0
+        if keep.mean() < 0.5:
+            return None  # more than half inconsistent: no object model to trust, keep all
+        return keep.astype(np.float64)
+
+    def _apply_weights(self):
+        """The band's weights: inverse noise variance, times the consistency mask."""
+        weights = self._base_weights
+        if self._consistency is not None:
+            weights = self._consistency if weights is None else weights * self._consistency
+        self._weights = weights
+        self._arrays["_weights"] = weights
 
     # ---- "contour", "ssd", "hb"
     def _contour_integer(self, arr, shift):
