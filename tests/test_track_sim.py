@@ -97,7 +97,7 @@ def test_fluctuation_and_clutter_moving_probe_followed(kind):
 @pytest.mark.parametrize("kind", ["gray_fluctuation", "clutter_occluder"])
 def test_fluctuation_and_clutter_moving_probe_near_the_bound(kind):
     # Theory: an efficient tracker with a 20-frame template has RMSE ~ sqrt(1 + 1/20) x the bound
-    # (frame 0's; along the sweep the moved ROI's bound stays within 10 % of it), plus an
+    # (frame 0's; along the sweep the moved ROI's bound is up to 13 % above it), plus an
     # interpolation error of a few hundredths of a px: 2x the bound leaves ample room.
     s = _moving_stats(kind)
     assert s["rmse"] <= 2.0 * s["crb"]
