@@ -189,8 +189,7 @@ def test_same_seed_same_frames_different_seed_different_noise():
 
 
 def test_occluder_passes_over_the_probe_shaft():
-    # the probe still, so that one pixel stays on its shaft (the sweep moves the shaft along
-    # itself, forward: the occluder then passes 45-105 px behind the tip, never over it)
+    # the probe still, so that one pixel stays on its shaft (the sweeping probe: next test)
     seq = make_sequence("clutter_occluder", n_frames=100, seed=0, n_manipulators=1,
                         noise=SEMNoise.off(), motion="still")
     x, y, w, h = seq.roi
@@ -288,3 +287,21 @@ def test_sweep_is_deterministic_by_seed():
 def test_bad_motion_raises(kind, kw, match):
     with pytest.raises(ValueError, match=match):
         make_sequence(kind, n_frames=2, seed=0, n_manipulators=1, **kw)
+
+
+def test_occluder_crosses_the_sweeping_probe_45px_behind_its_tip():
+    # With the default sweep the occluder's path is placed where the tip is planned to be when
+    # it crosses (a quarter of its 15 s period in: frame 48, the probe near the top of its
+    # travel): at that frame it darkens the shaft 45 px behind the tip, and never the tip.
+    kw = {"n_frames": 50, "seed": 0, "n_manipulators": 1, "noise": SEMNoise.off()}
+    seq = make_sequence("clutter_occluder", **kw)
+    bare = make_sequence("clutter_occluder", occluder_radius_px=1e-3, **kw)  # same path, no disc
+    diff = np.abs(seq.frames.astype(float) - bare.frames.astype(float))
+    tips = seq.truth[["x", "y"]].to_numpy()
+    assert tips[48, 0] - tips[0, 0] > 55
+    ang = math.radians(10.0)  # probe 0 points along 10 deg
+    x, y = tips[48]
+    assert diff[48, round(y - 45 * math.sin(ang)), round(x - 45 * math.cos(ang))] > 30
+    for k, (x, y) in enumerate(tips):
+        iy, ix = round(y), round(x)
+        assert diff[k, iy - 5:iy + 6, ix - 5:ix + 6].max() <= 2  # the blurred disc's far tail only

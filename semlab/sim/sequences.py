@@ -7,7 +7,9 @@
 * ``"low_dose"``: the scene at a fifth of the beam current.
 * ``"gray_fluctuation"``: strong per-frame gain/offset fluctuation and fast charging.
 * ``"clutter_occluder"``: dense static clutter, drifting particles and an out-of-focus
-  foreground object passing over the probe's shaft.
+  foreground object passing over the probe's shaft, 45 px behind the tip when it crosses
+  (~frame 48 at 13 frames/s; for a sweeping probe, behind where the sweep is planned to
+  have taken the tip by then, from the ground-truth hysteresis model).
 
 In the last three the probe MOVES by default (``motion="sweep"``): manipulator 0's x piezo
 is driven with a raised-cosine voltage ``u_k = u_peak (1 - cos(2 pi k / P)) / 2`` (``P`` =
@@ -124,6 +126,34 @@ def _voltage_for_displacement(target_px, pixel_size_nm, seed, travel_nm, view_de
     return 100.0 * 0.5 * (lo + hi)
 
 
+def _sweep_peak_voltage(rig, seed, amplitude_px):
+    """x-piezo voltage of manipulator 0 for ``2 x amplitude_px`` on the ascending branch."""
+    return _voltage_for_displacement(2.0 * amplitude_px, rig.sem.pixel_size_nm, seed,
+                                     rig.axis(0, "x").travel_nm, rig.view_angles_deg[0],
+                                     what=f"sweep_amplitude_px={amplitude_px} (travel 2 x amplitude)")
+
+
+def _sweep_voltages(u_peak, period, k):
+    """The raised-cosine sweep: ``u_peak (1 - cos(2 pi k / period)) / 2`` at frames ``k``."""
+    return u_peak * 0.5 * (1.0 - np.cos(2.0 * np.pi * np.asarray(k, float) / period))
+
+
+def _sweep_displacement_px(rig, seed, amplitude_px, period, k):
+    """Planned image displacement (dx, dy) px of probe 0 in frame ``k`` of the sweep.
+
+    The ground-truth Preisach model along the schedule (lag, creep and position noise
+    neglected: ~1 px), rotated by manipulator 0's view angle.
+    """
+    u_peak = _sweep_peak_voltage(rig, seed, amplitude_px)
+    hyst = default_hysteresis(0, "x", seed)
+    y = 0.0
+    for u in _sweep_voltages(u_peak, period, np.arange(k + 1)):
+        y = hyst.update(min(max(u / 100.0, 0.0), 1.0))
+    th = math.radians(rig.view_angles_deg[0])
+    r = y * rig.axis(0, "x").travel_nm / rig.sem.pixel_size_nm
+    return np.array([r * math.cos(th), r * math.sin(th)])
+
+
 def _check_motion(kind, opts):
     """The probe motion of ``kind`` from the overrides: ``(motion, (amplitude, period))``."""
     motion = opts.get("motion")
@@ -221,7 +251,8 @@ def make_sequence(kind: str, n_frames: int | None = None, seed: int = 0, **overr
     progress = bool(seq_opts.get("progress", False))
     motion, sweep = _check_motion(kind, seq_opts)
 
-    # the occluder passes over probe 0's shaft 45 px behind its tip
+    # the occluder passes over probe 0's shaft 45 px behind its tip (behind where the tip is
+    # planned to be when the occluder crosses, for a sweeping probe)
     rig_probe_kwargs = dict(overrides)
     if kind == "clutter_occluder" and clutter.occluder and clutter.occluder_path is None:
         probe_rig = SimulatedRig(seed=seed, noise=SEMNoise.off(), clutter=Clutter.none(),
@@ -230,10 +261,15 @@ def make_sequence(kind: str, n_frames: int | None = None, seed: int = 0, **overr
         ang = math.radians(probe_rig.sem.probe_angles_deg[0])
         d = np.array([math.cos(ang), math.sin(ang)])
         perp = np.array([-d[1], d[0]])
+        period_s = 2 * 150 * 2 / 40.0  # ~40 px/s; a pass takes ~7.5 s
+        if motion == "sweep":
+            # it crosses the middle of its path a quarter period in: frame (t / T) - 1/2
+            k_cross = int(period_s / 4 / probe_rig.sem.frame_period - 0.5)
+            tip = tip + _sweep_displacement_px(probe_rig, seed, *sweep, k_cross)
         p = tip - 45.0 * d
         clutter = dataclasses.replace(
             clutter, occluder_path=(tuple(p - 150 * perp), tuple(p + 150 * perp)),
-            occluder_period_s=2 * 150 * 2 / 40.0)  # ~40 px/s; a pass takes ~7.5 s
+            occluder_period_s=period_s)
 
     rig = SimulatedRig(seed=seed, noise=noise, clutter=clutter, **overrides)
     sem = rig.sem
@@ -263,11 +299,8 @@ def make_sequence(kind: str, n_frames: int | None = None, seed: int = 0, **overr
     elif motion == "sweep":
         n_frames = 100 if n_frames is None else int(n_frames)
         amp, period = sweep
-        u_peak = _voltage_for_displacement(2.0 * amp, sem.pixel_size_nm, seed,
-                                           rig.axis(0, "x").travel_nm, rig.view_angles_deg[0],
-                                           what=f"sweep_amplitude_px={amp} (travel 2 x amplitude)")
-        k = np.arange(n_frames)
-        schedule = list(u_peak * 0.5 * (1.0 - np.cos(2.0 * np.pi * k / period)))
+        u_peak = _sweep_peak_voltage(rig, seed, amp)
+        schedule = list(_sweep_voltages(u_peak, period, np.arange(n_frames)))
         meta_kind = {"motion": motion, "sweep_amplitude_px": amp, "sweep_period_frames": period,
                      "u_peak": u_peak}
     else:
