@@ -61,6 +61,9 @@ def test_make_sequence_contract(kind):
     assert (w, h) == (200, 200) and 0 <= x <= 320 - w and 0 <= y <= 240 - h
     assert all(0 < s < 5 for s in seq.crb)
     assert seq.meta["kind"] == kind and seq.meta["pixel_size_nm"] == 66.0
+    # the probe moves in every kind but "static" (tests/test_sim_rig.py checks the sweep)
+    assert seq.meta["motion"] == {"static": "still", "moves_200px": "steps"}.get(kind, "sweep")
+    assert len(seq.commands) == 4 and seq.commands["u"].iloc[0] == 0.0
 
 
 def test_crb_is_finite_and_bad_roi_raises():

@@ -189,8 +189,9 @@ def test_same_seed_same_frames_different_seed_different_noise():
 
 
 def test_occluder_passes_over_the_probe_shaft():
+    # the probe still, so that one pixel stays on its shaft (the sweeping probe: next test)
     seq = make_sequence("clutter_occluder", n_frames=100, seed=0, n_manipulators=1,
-                        noise=SEMNoise.off())
+                        noise=SEMNoise.off(), motion="still")
     x, y, w, h = seq.roi
     tx, ty = seq.truth.loc[0, ["x", "y"]]
     ang = math.radians(10.0)
@@ -199,3 +200,108 @@ def test_occluder_passes_over_the_probe_shaft():
     # on the shaft the probe is bright; the occluder darkens it while passing
     assert vals.max() - vals.min() > 30
     assert x <= px < x + w and y <= py < y + h
+
+
+# --------------------------------------------------------------- the probe sweep (moving probe)
+def test_sweep_follows_the_voltage_from_rest():
+    # low_dose with the default sweep, noise and clutter off (the piezo's 1 nm position noise
+    # stays: 0.015 px): the truth follows the raised-cosine voltage on the x piezo.
+    seq = make_sequence("low_dose", n_frames=100, seed=1, **QUIET)
+    amp, period = 30.0, 80
+    assert seq.meta["motion"] == "sweep"
+    assert seq.meta["sweep_amplitude_px"] == amp and seq.meta["sweep_period_frames"] == period
+    u = seq.commands["u"].to_numpy()
+    k = np.arange(100)
+    lsb = 100.0 / 2**16
+    np.testing.assert_allclose(u, seq.meta["u_peak"] * (1 - np.cos(2 * np.pi * k / period)) / 2,
+                               atol=lsb / 2 + 1e-12)
+    assert u[0] == 0.0
+    x = seq.truth["x"].to_numpy()
+    d = x - x[0]
+    # at rest in frame 0: the first step is u_peak (1 - cos(2 pi / 80)) / 2 = 0.15 % of u_peak
+    assert abs(d[1]) < 0.1
+    # at the top (frame 40, u = u_peak) the ascending branch gives 2 x amplitude exactly; creep
+    # adds at most gamma * 60 px * log10(1 + t / t0) with t the 40 frames of the rise
+    creep_max = 0.015 * 2 * amp * math.log10(1 + 40 / 13 / 0.1)
+    assert 2 * amp - 0.1 < d[period // 2] < 2 * amp + creep_max
+    assert d.max() < 2 * amp + creep_max
+    # where the voltage moves, the probe moves the same way; never more than ~3 px per frame
+    du, dx = np.diff(u), np.diff(x)
+    big = np.abs(du) > 0.2 * np.abs(du).max()
+    assert big.sum() > 40 and np.all(np.sign(dx[big]) == np.sign(du[big]))
+    assert np.abs(dx).max() < 3.0
+    # back at 0 V (frame 80) the hysteresis memory is wiped out: only creep is left
+    creep_back = 0.015 * 2 * amp * math.log10(1 + 80 / 13 / 0.1)
+    assert abs(d[period]) < creep_back
+    # along the image's y only the 2 deg view rotation of the x axis: tan(2 deg) of the travel
+    dy = seq.truth["y"].to_numpy() - seq.truth["y"].iloc[0]
+    np.testing.assert_allclose(dy, d * math.tan(math.radians(2.0)), atol=0.05)
+
+
+@pytest.mark.parametrize("kind", ["gray_fluctuation", "clutter_occluder"])
+def test_sweep_amplitude_and_period_overrides(kind):
+    seq = make_sequence(kind, n_frames=21, seed=2, n_manipulators=1, sweep_amplitude_px=10,
+                        sweep_period_frames=40, noise=SEMNoise.off())
+    d = seq.truth["x"].to_numpy() - seq.truth["x"].iloc[0]
+    # frame 20 is the top of a 40-frame period: 2 x 10 px (+ creep)
+    assert 19.9 < d[20] < 20.0 + 0.015 * 20 * math.log10(1 + 20 / 13 / 0.1)
+    assert seq.meta["motion"] == "sweep" and seq.meta["sweep_period_frames"] == 40
+
+
+def test_still_motion_is_the_old_still_probe():
+    # the still variant of low_dose is the still scene at 10 pA: frame for frame the "static"
+    # sequence with the beam current lowered, and the piezo never leaves 0 V
+    still = make_sequence("low_dose", n_frames=4, seed=3, motion="still")
+    ref = make_sequence("static", n_frames=4, seed=3, beam_current_pA=10.0)
+    np.testing.assert_array_equal(still.frames, ref.frames)
+    assert still.meta["motion"] == "still" and (still.commands["u"] == 0).all()
+    assert make_sequence("static", n_frames=2, seed=3).meta["motion"] == "still"
+    moving = make_sequence("low_dose", n_frames=4, seed=3)
+    assert moving.crb == still.crb  # frame 0 is the same (the probe at rest at 0 V)
+    np.testing.assert_array_equal(moving.frames[0], still.frames[0])
+
+
+def test_sweep_is_deterministic_by_seed():
+    a = make_sequence("clutter_occluder", n_frames=6, seed=4)
+    b = make_sequence("clutter_occluder", n_frames=6, seed=4)
+    np.testing.assert_array_equal(a.frames, b.frames)
+    np.testing.assert_array_equal(a.truth[["x", "y"]].to_numpy(), b.truth[["x", "y"]].to_numpy())
+    np.testing.assert_array_equal(a.commands["u"], b.commands["u"])
+
+
+@pytest.mark.parametrize("kind, kw, match", [
+    ("low_dose", {"motion": "wobble"}, "motion"),
+    ("low_dose", {"motion": 3}, "motion"),
+    ("static", {"motion": "sweep"}, "static"),
+    ("moves_200px", {"motion": "still"}, "moves_200px"),
+    ("gray_fluctuation", {"motion": "still", "sweep_amplitude_px": 10}, "sweep"),
+    ("static", {"sweep_period_frames": 50}, "sweep"),
+    ("low_dose", {"sweep_amplitude_px": 0}, "sweep_amplitude_px"),
+    ("low_dose", {"sweep_amplitude_px": -5}, "sweep_amplitude_px"),
+    ("low_dose", {"sweep_amplitude_px": float("nan")}, "sweep_amplitude_px"),
+    ("low_dose", {"sweep_amplitude_px": "big"}, "sweep_amplitude_px"),
+    ("low_dose", {"sweep_period_frames": 1}, "sweep_period_frames"),
+    ("low_dose", {"sweep_period_frames": float("inf")}, "sweep_period_frames"),
+    ("clutter_occluder", {"sweep_amplitude_px": 400}, "travel"),  # 800 px > 757 px of travel
+])
+def test_bad_motion_raises(kind, kw, match):
+    with pytest.raises(ValueError, match=match):
+        make_sequence(kind, n_frames=2, seed=0, n_manipulators=1, **kw)
+
+
+def test_occluder_crosses_the_sweeping_probe_45px_behind_its_tip():
+    # With the default sweep the occluder's path is placed where the tip is planned to be when
+    # it crosses (a quarter of its 15 s period in: frame 48, the probe near the top of its
+    # travel): at that frame it darkens the shaft 45 px behind the tip, and never the tip.
+    kw = {"n_frames": 50, "seed": 0, "n_manipulators": 1, "noise": SEMNoise.off()}
+    seq = make_sequence("clutter_occluder", **kw)
+    bare = make_sequence("clutter_occluder", occluder_radius_px=1e-3, **kw)  # same path, no disc
+    diff = np.abs(seq.frames.astype(float) - bare.frames.astype(float))
+    tips = seq.truth[["x", "y"]].to_numpy()
+    assert tips[48, 0] - tips[0, 0] > 55
+    ang = math.radians(10.0)  # probe 0 points along 10 deg
+    x, y = tips[48]
+    assert diff[48, round(y - 45 * math.sin(ang)), round(x - 45 * math.cos(ang))] > 30
+    for k, (x, y) in enumerate(tips):
+        iy, ix = round(y), round(x)
+        assert diff[k, iy - 5:iy + 6, ix - 5:ix + 6].max() <= 2  # the blurred disc's far tail only
