@@ -40,7 +40,7 @@ SAMPLES = {
         "moves_200px",
         {"seed": 0, "n_cycles": 1, "move_frames": 3, "dwell_frames": 2},
     ),
-    "synthetic_clutter_occluder": ("clutter_occluder", {"n_frames": 6, "seed": 0}),
+    "synthetic_clutter_occluder": ("clutter_occluder", {"n_frames": 6, "seed": 0, "motion": "still"}),
 }
 
 
