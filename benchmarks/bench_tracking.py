@@ -178,6 +178,9 @@ def main(argv=None) -> int:
     print("\n# targets for the default method (issue 3)")
     for what, ok, detail in checks:
         print(f"{'PASS' if ok else 'FAIL'}  {what}: {detail}")
+    print("# (the CRB above is one frame's; a displacement from frame 0 also carries frame 0's own error, "
+          "which no later frame can remove: its bound is sqrt(2) x CRB, so '2 x CRB' is 1.41 x the "
+          "displacement's bound. The targets keep the stricter one-frame reading.)")
 
     st = table[table.sequence == "static"].set_index("tracker")
     paper = pd.DataFrame({
