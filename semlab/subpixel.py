@@ -416,11 +416,41 @@ def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=N
         t_in, t_out = float(t @ ind_in), float(t @ ind_out)
         if t_in == t_out:
             raise ValueError("the template has no contrast between object and background")
+        outside = (~inside).astype(np.float64)
+        inside_f = inside.astype(np.float64)
+        # Σ r·[inside·t, outside·t, inside, outside] for robust weights r: the weighted region
+        # means of the template in one product.
+        levels = np.stack([inside_f * t, outside * t, inside_f, outside], axis=1)
+        regions2 = np.stack([inside_f, outside], axis=1)
+    if not joint:
+        # Everything but the robust weights is fixed during the iteration, so the 2×2 normal
+        # matrix is g²·Σ robust·(prior·J·E) with E the plain or the level-absorbed gradient
+        # (_absorb is linear: absorbing g·T_x is g times absorbing T_x), and the right-hand
+        # side g·Σ (robust·residual)·(prior·J): one matrix-vector product each.
+        ptx, pty = prior * tx, prior * ty
+        plain_hess = np.stack([ptx * tx, ptx * ty, pty * tx, pty * ty], axis=1)
+        if two_level:
+            ax, ay = _absorb(tx, inside, ind_in, ind_out), _absorb(ty, inside, ind_in, ind_out)
+            absorbed_hess = np.stack([ptx * ax, ptx * ay, pty * ax, pty * ay], axis=1)
+        rhs_basis = np.stack([ptx, pty], axis=1)
+
+    if exact:
+        # The crop is filtered once per iteration; the band's flat indices are fixed.
+        rows, cols = img.shape
+        ix0, iy0 = pts[:, 0].astype(np.intp), pts[:, 1].astype(np.intp)
+        flat_base = iy0 * cols + ix0
+        lo_x, hi_x, lo_y, hi_y = ix0.min(), ix0.max(), iy0.min(), iy0.max()
 
     def sample(shift):
-        if exact:
-            return sample_shifted_filtered(img, pts, shift)
-        return _remap_points(img, px + np.float32(shift[0]), py + np.float32(shift[1]))
+        if not exact:
+            return _remap_points(img, px + np.float32(shift[0]), py + np.float32(shift[1]))
+        fx, fy = np.floor(shift[0]), np.floor(shift[1])
+        if not (lo_x + fx >= 0 and lo_y + fy >= 0 and hi_x + fx < cols and hi_y + fy < rows):
+            return sample_shifted_filtered(img, pts, shift)  # border replicated
+        wx, wy = _keys_taps(shift[0] - fx), _keys_taps(shift[1] - fy)
+        filtered = cv2.sepFilter2D(img, -1, wx.reshape(1, 4), wy.reshape(4, 1), anchor=(1, 1),
+                                   borderType=cv2.BORDER_REPLICATE)
+        return filtered.ravel().take(flat_base + (int(fy) * cols + int(fx))).astype(np.float64)
 
     converged = False
     step = np.inf
@@ -437,15 +467,15 @@ def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=N
             # stay fixed (the means move with p, a coupling Gauss–Newton does not model). The
             # means are weighted by the robust weights, so occluders and clutter that fall into
             # the band do not pull the levels.
-            wi, wo = robust * inside, robust * ~inside
-            swi, swo = float(wi.sum()), float(wo.sum())
+            swt_in, swt_out, swi, swo = robust @ levels
             if swi <= 0 or swo <= 0:
                 break
-            ti, to = float(wi @ t) / swi, float(wo @ t) / swo
+            ti, to = swt_in / swi, swt_out / swo
             if ti == to:
                 break
-            g = (float(wi @ samples) / swi - float(wo @ samples) / swo) / (ti - to)
-            o = float(wo @ samples) / swo - g * to
+            si, so = (robust * samples) @ regions2
+            g = float((si / swi - so / swo) / (ti - to))
+            o = float(so / swo - g * to)
             if abs(g) < 1e-6:
                 break
         residual = samples - (g * t + o)
@@ -454,17 +484,19 @@ def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=N
             if spread is None:
                 spread = 1.4826 * float(np.median(np.abs(z - np.median(z)))) + 1e-9
             if step > 0.05 or not tukey:
-                a = np.abs(z) / (huber * spread)
-                robust = np.minimum(1.0, 1.0 / np.maximum(a, 1e-12))
+                # min(1, c/|z|) with c = huber · spread.
+                c = huber * spread
+                robust = c / np.maximum(np.abs(z), c)
             else:
                 # Close to the answer, Tukey's biweight (c = 4.685 spreads, 95 % efficient for
                 # Gaussian noise) gives occluded pixels no influence at all, where Huber's only
                 # bounds it.
                 u = np.minimum(np.abs(z) / (4.685 * spread), 1.0)
                 robust = (1.0 - u * u) ** 2
-        w = prior * robust
-        jx, jy = g * tx, g * ty
-        wjx, wjy = w * jx, w * jy
+        if joint or (curvature is not None and block is None):
+            w = prior * robust
+            jx, jy = g * tx, g * ty
+            wjx, wjy = w * jx, w * jy
         if joint:
             jac = np.stack([jx, jy, t, np.ones_like(t)], axis=1)
             inst = jac if instrument is None else np.stack([jx, jy, instrument, np.ones_like(t)], axis=1)
@@ -480,10 +512,9 @@ def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=N
             # is the gradient minus what the levels absorb of it (region indicator, not the noisy
             # template, carries the levels). Only the step uses it; the estimating equation
             # Σ w J r = 0 keeps the plain template gradient, uncorrelated with the residual's noise.
-            ex, ey = (_absorb(jx, inside, ind_in, ind_out), _absorb(jy, inside, ind_in, ind_out)) if (
-                two_level and step > freeze) else (jx, jy)
-            hess = np.array([[wjx @ ex, wjx @ ey], [wjy @ ex, wjy @ ey]])
-            rhs = np.array([wjx @ residual, wjy @ residual])
+            basis = absorbed_hess if (two_level and step > freeze) else plain_hess
+            hess = (g * g * (robust @ basis)).reshape(2, 2)
+            rhs = g * ((robust * residual) @ rhs_basis)
         if curvature is not None:
             if block is None:
                 gix = _remap_points(curvature[0], px + np.float32(p[0]), py + np.float32(p[1]))
@@ -496,10 +527,17 @@ def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=N
                     block = False
             if block is not False:
                 hess[:2, :2] = block
-        try:
-            delta = np.linalg.solve(hess, rhs)
-        except np.linalg.LinAlgError:
-            break
+        if joint:
+            try:
+                delta = np.linalg.solve(hess, rhs)
+            except np.linalg.LinAlgError:
+                break
+        else:
+            det = hess[0, 0] * hess[1, 1] - hess[0, 1] * hess[1, 0]
+            if det == 0:
+                break
+            delta = np.array([(hess[1, 1] * rhs[0] - hess[0, 1] * rhs[1]) / det,
+                              (hess[0, 0] * rhs[1] - hess[1, 0] * rhs[0]) / det])
         if not np.all(np.isfinite(delta)):
             break
         # A step that reverses a good part of a previous one longer than 0.1 px means the
