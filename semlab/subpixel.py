@@ -324,7 +324,8 @@ def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=N
                              offset0=0.0, max_iterations: int = 20, tolerance: float = 2e-3,
                              huber: float | None = 2.0, photometric: bool = True, regions=None,
                              exact: bool = True, curvature=None, tukey: bool = False,
-                             template_variance=None, instrument=None, freeze: float = 0.01) -> GaussNewtonResult:
+                             template_variance=None, instrument=None, freeze: float = 0.01,
+                             max_move: float = np.inf) -> GaussNewtonResult:
     """Inverse-compositional Gauss–Newton for a translation with gain/offset (beyond eq. 9).
 
     Minimises ``Σ wᵢ ρ(I(xᵢ + p) − g·T(xᵢ) − o)`` over the template pixels ``xᵢ`` (eq. 2 with a
@@ -391,6 +392,11 @@ def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=N
         template gradient — lower variance when the template is noisy — without the overshoot
         that the smaller smoothed gradients would otherwise cause.
 
+    max_move : float
+        Give up (``converged=False``) as soon as the translation has moved more than this many
+        px (in x or y) from ``shift0``: a caller that rejects such fits need not wait for
+        ``max_iterations``.
+
     Returns
     -------
     GaussNewtonResult
@@ -399,6 +405,7 @@ def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=N
     pts = np.asarray(points, np.float64)
     px, py = pts[:, 0].astype(np.float32), pts[:, 1].astype(np.float32)
     p = np.array(shift0, np.float64)
+    start = p.copy()
     g, o = float(gain0), float(offset0)
     t = np.asarray(values, np.float64)
     tx, ty = np.asarray(gx, np.float64), np.asarray(gy, np.float64)
@@ -556,6 +563,8 @@ def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=N
         step = damping * float(np.hypot(d2[0], d2[1]))
         if step < tolerance:
             converged = True
+            break
+        if max(abs(p[0] - start[0]), abs(p[1] - start[1])) > max_move:
             break
     else:
         # Huber re-weighting can make the last digits wander: a step well below a tenth of a

@@ -496,14 +496,16 @@ class Tracker:
         # Block-averaging by f maps both images alike: an offset k in the small image is f·k.
         return np.array([wx + f * px - self.roi[0], wy + f * py - self.roi[1]])
 
-    def _fit(self, arr, shift0, gain0, offset0, margin=12, at=(0, 0), robust_start=True):
-        """Gauss–Newton on the contour band of the whitened crop around ``shift0``.
+    def _band_crop(self, arr, shift, margin, at):
+        """The whitened crop of ``arr`` around the band at ``shift`` (``margin`` px each side).
 
-        ``arr`` is the frame, or a part of it whose pixel [0, 0] is the frame's pixel ``at``.
+        Returns the float32 crop, its whitened version, the band points in crop coordinates at
+        zero shift, the per-point arrays (band pixels that have left the image dropped) and the
+        crop's integer shift.
         """
         x0, y0 = self.roi[0] - at[0], self.roi[1] - at[1]
         bx0, by0, bx1, by1 = self._bbox
-        sx, sy = round(shift0[0]), round(shift0[1])
+        sx, sy = round(shift[0]), round(shift[1])
         cx0, cy0 = max(x0 + bx0 + sx - margin, 0), max(y0 + by0 + sy - margin, 0)
         cx1 = min(x0 + bx1 + sx + margin, arr.shape[1])
         cy1 = min(y0 + by1 + sy + margin, arr.shape[0])
@@ -515,13 +517,25 @@ class Tracker:
         pts = self._points + (x0 - cx0, y0 - cy0)
         arrays = self._arrays
         # Band pixels that have left the image (the object near its border) drop out.
-        px0, py0 = pts[:, 0] + shift0[0], pts[:, 1] + shift0[1]
+        px0, py0 = pts[:, 0] + shift[0], pts[:, 1] + shift[1]
         valid = (px0 >= 3) & (py0 >= 3) & (px0 <= cw.shape[1] - 4) & (py0 <= cw.shape[0] - 4)
         if not valid.all():
             if valid.mean() < 0.5 or valid.sum() < 10:
                 raise ValueError("the target has left the image")
             pts = pts[valid]
             arrays = {k: (v[valid] if isinstance(v, np.ndarray) else v) for k, v in arrays.items()}
+        return crop, cw, pts, arrays, np.array([sx, sy], float)
+
+    def _fit(self, arr, shift0, gain0, offset0, margin=12, at=(0, 0), robust_start=True, max_move=None):
+        """Gauss–Newton on the contour band of the whitened crop around ``shift0``.
+
+        ``arr`` is the frame, or a part of it whose pixel [0, 0] is the frame's pixel ``at``.
+        A fit whose translation would take the band more than ``margin − 3`` px from the crop
+        it was started in (or moves more than ``max_move`` px) stops there, unconverged: beyond,
+        the band would sample the crop's replicated border.
+        """
+        reach = margin - 3
+        crop, cw, pts, arrays, centre = self._band_crop(arr, shift0, margin, at)
         two_level = self.photometry == "regions"
         common = {"weights": arrays["_weights"], "huber": self.huber, "photometric": self.photometric,
                   "regions": arrays["_inside"] if two_level else None}
@@ -530,27 +544,41 @@ class Tracker:
             # Stage 1, coarse to fine, both images smoothed alike (σ = 4, 2, 1 × coarse_sigma): a
             # wide basin and a smooth cost, so a start several px off (a bad prediction, a coarse
             # peak slid along a straight edge) or a noisy one-frame template still converges.
-            moved_total = np.zeros(2)
+            ran_off = 0
             for k, sigma in enumerate(self._stage1_sigmas):
                 smooth = cv2.GaussianBlur(cw, (0, 0), sigma)
                 values, sgx, sgy = (arrays[f"_s{k}_values"], arrays[f"_s{k}_gx"], arrays[f"_s{k}_gy"])
+                room = reach - float(np.max(np.abs(np.asarray(shift0, float) - centre)))
                 first = gauss_newton_translation(smooth, pts, values, sgx, sgy, shift0, gain0=gain0, offset0=offset0,
                                                  max_iterations=self.max_iterations, tolerance=0.02,
                                                  weights=arrays["_weights"], huber=self.huber,
-                                                 photometric=self.photometric, regions=arrays["_inside"])
+                                                 photometric=self.photometric, regions=arrays["_inside"],
+                                                 max_move=room)
                 if first.converged and abs(first.gain) > 0.05:
-                    moved_total += first.shift - shift0
                     shift0, gain0, offset0 = first.shift, first.gain, first.offset
+                elif np.max(np.abs(first.shift - shift0)) > room:
+                    ran_off += 1
+            if ran_off == len(self._stage1_sigmas):
+                # The start is farther off than the crop reaches at every scale: a job for the
+                # coarse search, not for a fit in the wrong place.
+                return first, 0.0
+            if np.any(np.round(shift0) != centre):
+                # Stage 2 in a crop centred on its start (the same pixels, whitened alike).
+                crop, cw, pts, arrays, centre = self._band_crop(arr, shift0, margin, at)
+                common = {"weights": arrays["_weights"], "huber": self.huber, "photometric": self.photometric,
+                          "regions": arrays["_inside"] if two_level else None}
         # Stage 2, full resolution: the efficient estimate. A strongly smoothed Jacobian (young
         # template) takes its curvature from the image; a light one is close enough to exact.
         curvature = five_point_gradients(cw) if self._sigma_j > 1.0 else None
+        limit = reach if max_move is None else min(reach, max_move)
         fit = gauss_newton_translation(cw, pts, arrays["_tw_values"], arrays["_gx"], arrays["_gy"], shift0,
                                        gain0=gain0, offset0=offset0, max_iterations=self.max_iterations,
                                        curvature=curvature,
                                        template_variance=None if (two_level or iv) else arrays["_t_var"],
-                                       instrument=arrays["_instrument"] if iv else None, **common)
+                                       instrument=arrays["_instrument"] if iv else None,
+                                       max_move=limit, **common)
         moved = float(np.max(np.abs(fit.shift - np.asarray(shift0, float)))) if np.all(np.isfinite(fit.shift)) else np.inf
-        if moved > margin - 3:
+        if moved > limit:
             fit.converged = False
         plain = cv2.remap(crop, (pts[:, 0] + fit.shift[0]).astype(np.float32).reshape(1, -1),
                           (pts[:, 1] + fit.shift[1]).astype(np.float32).reshape(1, -1), cv2.INTER_CUBIC,
@@ -571,7 +599,10 @@ class Tracker:
             # The constant-velocity prediction first: while tracking it is within a fraction of
             # a pixel (then the smoothed first stage is skipped) or a few px (a change of speed).
             steady = self._last_prediction_error < 1.0
-            fit, score = self._fit(arr, predicted, self.gain, self.offset, robust_start=not steady)
+            # A steady fit that has to move more than a few px is a change of speed: the
+            # smoothed stage is the tool then, not 20 crawling full-resolution iterations.
+            fit, score = self._fit(arr, predicted, self.gain, self.offset, robust_start=not steady,
+                                   max_move=3.0 if steady else None)
             if steady and not fit.converged:
                 fit, score = self._fit(arr, predicted, self.gain, self.offset)
             good = fit.converged and score >= max(self._threshold(), typical)
