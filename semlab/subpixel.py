@@ -12,6 +12,7 @@ close to the Cramér–Rao bound of an SEM frame whose noise is correlated along
 from __future__ import annotations
 
 import itertools
+import math
 from dataclasses import dataclass
 
 import cv2
@@ -23,6 +24,7 @@ __all__ = [
     "NoiseModel",
     "estimate_noise",
     "five_point_gradients",
+    "gauss_newton_setup",
     "gauss_newton_translation",
     "gradient_subpixel_shift",
     "sample_bicubic",
@@ -320,12 +322,66 @@ def _absorb(grad, inside, ind_in, ind_out):
     return grad - inside * (mean_in - mean_out) - mean_out
 
 
+def _median(x) -> float:
+    """``np.median`` of a 1-D array without its overhead (the same value)."""
+    n = x.size
+    k = n // 2
+    if n % 2:
+        return float(np.partition(x, k)[k])
+    part = np.partition(x, [k - 1, k])
+    return 0.5 * (float(part[k - 1]) + float(part[k]))
+
+
+def gauss_newton_setup(values, gx, gy, *, weights=None, regions=None, photometric: bool = True) -> dict:
+    """What :func:`gauss_newton_translation` derives from the template alone, computed once.
+
+    A tracker registers every frame against the same template pixels: passing this as
+    ``setup=`` saves rebuilding the same products at every call. The arguments mean the same as
+    in :func:`gauss_newton_translation` and must be the same arrays.
+    """
+    t = np.asarray(values, np.float64)
+    tx, ty = np.asarray(gx, np.float64), np.asarray(gy, np.float64)
+    prior = np.ones_like(t) if weights is None else np.asarray(weights, np.float64)
+    out = {"t": t, "tx": tx, "ty": ty, "prior": prior, "sqrt_prior": np.sqrt(prior)}
+    joint = photometric and regions is None
+    two_level = photometric and regions is not None
+    if two_level:
+        inside = np.asarray(regions, bool)
+        n_in = int(inside.sum())
+        if n_in == 0 or n_in == len(inside):
+            raise ValueError("regions must mark both object and background pixels")
+        ind_in = inside / n_in
+        ind_out = ~inside / (len(inside) - n_in)
+        if float(t @ ind_in) == float(t @ ind_out):
+            raise ValueError("the template has no contrast between object and background")
+        outside = (~inside).astype(np.float64)
+        inside_f = inside.astype(np.float64)
+        # Σ r·[inside·t, outside·t, inside, outside] for robust weights r: the weighted region
+        # means of the template in one product.
+        out.update(inside=inside, ind_in=ind_in, ind_out=ind_out,
+                   levels=np.stack([inside_f * t, outside * t, inside_f, outside], axis=1),
+                   regions2=np.stack([inside_f, outside], axis=1))
+    if not joint:
+        # Everything but the robust weights is fixed during the iteration, so the 2×2 normal
+        # matrix is g²·Σ robust·(prior·J·E) with E the plain or the level-absorbed gradient
+        # (_absorb is linear: absorbing g·T_x is g times absorbing T_x), and the right-hand
+        # side g·Σ (robust·residual)·(prior·J): one matrix-vector product each.
+        ptx, pty = prior * tx, prior * ty
+        out["plain_hess"] = np.stack([ptx * tx, ptx * ty, pty * tx, pty * ty], axis=1)
+        if two_level:
+            ax, ay = _absorb(tx, inside, ind_in, ind_out), _absorb(ty, inside, ind_in, ind_out)
+            out["absorbed_hess"] = np.stack([ptx * ax, ptx * ay, pty * ax, pty * ay], axis=1)
+        out["rhs_basis"] = np.stack([ptx, pty], axis=1)
+    out["key"] = (photometric, regions is None)
+    return out
+
+
 def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=None, gain0=1.0,
                              offset0=0.0, max_iterations: int = 20, tolerance: float = 2e-3,
                              huber: float | None = 2.0, photometric: bool = True, regions=None,
                              exact: bool = True, curvature=None, tukey: bool = False,
                              template_variance=None, instrument=None, freeze: float = 0.01,
-                             max_move: float = np.inf) -> GaussNewtonResult:
+                             max_move: float = np.inf, setup: dict | None = None) -> GaussNewtonResult:
     """Inverse-compositional Gauss–Newton for a translation with gain/offset (beyond eq. 9).
 
     Minimises ``Σ wᵢ ρ(I(xᵢ + p) − g·T(xᵢ) − o)`` over the template pixels ``xᵢ`` (eq. 2 with a
@@ -396,6 +452,9 @@ def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=N
         Give up (``converged=False``) as soon as the translation has moved more than this many
         px (in x or y) from ``shift0``: a caller that rejects such fits need not wait for
         ``max_iterations``.
+    setup : dict, optional
+        :func:`gauss_newton_setup` of the same ``values, gx, gy, weights, regions,
+        photometric`` (the template's constants, computed once by the caller).
 
     Returns
     -------
@@ -407,57 +466,35 @@ def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=N
     p = np.array(shift0, np.float64)
     start = p.copy()
     g, o = float(gain0), float(offset0)
-    t = np.asarray(values, np.float64)
-    tx, ty = np.asarray(gx, np.float64), np.asarray(gy, np.float64)
-    prior = np.ones_like(t) if weights is None else np.asarray(weights, np.float64)
-    sqrt_prior = np.sqrt(prior)
+    if setup is None or setup["key"] != (photometric, regions is None):
+        setup = gauss_newton_setup(values, gx, gy, weights=weights, regions=regions, photometric=photometric)
+    t, tx, ty, prior, sqrt_prior = (setup[k] for k in ("t", "tx", "ty", "prior", "sqrt_prior"))
     joint = photometric and regions is None
     two_level = photometric and regions is not None
     if two_level:
-        inside = np.asarray(regions, bool)
-        n_in = int(inside.sum())
-        if n_in == 0 or n_in == len(inside):
-            raise ValueError("regions must mark both object and background pixels")
-        ind_in = inside / n_in
-        ind_out = ~inside / (len(inside) - n_in)
-        t_in, t_out = float(t @ ind_in), float(t @ ind_out)
-        if t_in == t_out:
-            raise ValueError("the template has no contrast between object and background")
-        outside = (~inside).astype(np.float64)
-        inside_f = inside.astype(np.float64)
-        # Σ r·[inside·t, outside·t, inside, outside] for robust weights r: the weighted region
-        # means of the template in one product.
-        levels = np.stack([inside_f * t, outside * t, inside_f, outside], axis=1)
-        regions2 = np.stack([inside_f, outside], axis=1)
+        inside, ind_in, ind_out, levels, regions2 = (setup[k] for k in ("inside", "ind_in", "ind_out", "levels",
+                                                                          "regions2"))
     if not joint:
-        # Everything but the robust weights is fixed during the iteration, so the 2×2 normal
-        # matrix is g²·Σ robust·(prior·J·E) with E the plain or the level-absorbed gradient
-        # (_absorb is linear: absorbing g·T_x is g times absorbing T_x), and the right-hand
-        # side g·Σ (robust·residual)·(prior·J): one matrix-vector product each.
-        ptx, pty = prior * tx, prior * ty
-        plain_hess = np.stack([ptx * tx, ptx * ty, pty * tx, pty * ty], axis=1)
-        if two_level:
-            ax, ay = _absorb(tx, inside, ind_in, ind_out), _absorb(ty, inside, ind_in, ind_out)
-            absorbed_hess = np.stack([ptx * ax, ptx * ay, pty * ax, pty * ay], axis=1)
-        rhs_basis = np.stack([ptx, pty], axis=1)
+        plain_hess, rhs_basis = setup["plain_hess"], setup["rhs_basis"]
+        absorbed_hess = setup.get("absorbed_hess")
 
     if exact:
         # The crop is filtered once per iteration; the band's flat indices are fixed.
         rows, cols = img.shape
         ix0, iy0 = pts[:, 0].astype(np.intp), pts[:, 1].astype(np.intp)
         flat_base = iy0 * cols + ix0
-        lo_x, hi_x, lo_y, hi_y = ix0.min(), ix0.max(), iy0.min(), iy0.max()
+        lo_x, hi_x, lo_y, hi_y = int(ix0.min()), int(ix0.max()), int(iy0.min()), int(iy0.max())
 
     def sample(shift):
         if not exact:
             return _remap_points(img, px + np.float32(shift[0]), py + np.float32(shift[1]))
-        fx, fy = np.floor(shift[0]), np.floor(shift[1])
+        fx, fy = math.floor(shift[0]), math.floor(shift[1])
         if not (lo_x + fx >= 0 and lo_y + fy >= 0 and hi_x + fx < cols and hi_y + fy < rows):
             return sample_shifted_filtered(img, pts, shift)  # border replicated
         wx, wy = _keys_taps(shift[0] - fx), _keys_taps(shift[1] - fy)
         filtered = cv2.sepFilter2D(img, -1, wx.reshape(1, 4), wy.reshape(4, 1), anchor=(1, 1),
                                    borderType=cv2.BORDER_REPLICATE)
-        return filtered.ravel().take(flat_base + (int(fy) * cols + int(fx))).astype(np.float64)
+        return filtered.ravel().take(flat_base + (fy * cols + fx)).astype(np.float64)
 
     converged = False
     step = np.inf
@@ -474,22 +511,22 @@ def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=N
             # stay fixed (the means move with p, a coupling Gauss–Newton does not model). The
             # means are weighted by the robust weights, so occluders and clutter that fall into
             # the band do not pull the levels.
-            swt_in, swt_out, swi, swo = robust @ levels
+            swt_in, swt_out, swi, swo = (robust @ levels).tolist()
             if swi <= 0 or swo <= 0:
                 break
             ti, to = swt_in / swi, swt_out / swo
             if ti == to:
                 break
-            si, so = (robust * samples) @ regions2
-            g = float((si / swi - so / swo) / (ti - to))
-            o = float(so / swo - g * to)
+            si, so = ((robust * samples) @ regions2).tolist()
+            g = (si / swi - so / swo) / (ti - to)
+            o = so / swo - g * to
             if abs(g) < 1e-6:
                 break
         residual = samples - (g * t + o)
         if huber is not None:
             z = residual * sqrt_prior
             if spread is None:
-                spread = 1.4826 * float(np.median(np.abs(z - np.median(z)))) + 1e-9
+                spread = 1.4826 * _median(np.abs(z - _median(z))) + 1e-9
             if step > 0.05 or not tukey:
                 # min(1, c/|z|) with c = huber · spread.
                 c = huber * spread
@@ -539,28 +576,35 @@ def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=N
                 delta = np.linalg.solve(hess, rhs)
             except np.linalg.LinAlgError:
                 break
+            if not np.all(np.isfinite(delta)):
+                break
+            dx, dy = float(delta[0]), float(delta[1])
         else:
-            det = hess[0, 0] * hess[1, 1] - hess[0, 1] * hess[1, 0]
+            # The 2×2 solve in closed form, on Python floats (cheaper than LAPACK at this size).
+            h00, h01, h10, h11 = hess.ravel().tolist()
+            r0, r1 = rhs.tolist()
+            det = h00 * h11 - h01 * h10
             if det == 0:
                 break
-            delta = np.array([(hess[1, 1] * rhs[0] - hess[0, 1] * rhs[1]) / det,
-                              (hess[0, 0] * rhs[1] - hess[1, 0] * rhs[0]) / det])
-        if not np.all(np.isfinite(delta)):
-            break
+            dx, dy = (h11 * r0 - h01 * r1) / det, (h00 * r1 - h10 * r0) / det
+            if not (math.isfinite(dx) and math.isfinite(dy)):
+                break
         # A step that reverses a good part of a previous one longer than 0.1 px means the
         # linearisation overshoots (noisy Jacobian, a far start): halve the steps from then on.
-        d2 = delta[:2]
-        if prev is not None and float(prev @ prev) > 0.01 and float(d2 @ prev) < -0.25 * float(prev @ prev):
-            damping = max(0.5 * damping, 0.125)
-        prev = d2.copy()
+        if prev is not None:
+            pp = prev[0] * prev[0] + prev[1] * prev[1]
+            if pp > 0.01 and dx * prev[0] + dy * prev[1] < -0.25 * pp:
+                damping = max(0.5 * damping, 0.125)
+        prev = (dx, dy)
         # Inverse composition: the template moved by delta[:2], so the image position moves back.
-        p -= damping * d2
+        p[0] -= damping * dx
+        p[1] -= damping * dy
         if joint:
             g += delta[2]
             o += delta[3]
         if abs(g) < 1e-6:
             break
-        step = damping * float(np.hypot(d2[0], d2[1]))
+        step = damping * math.hypot(dx, dy)
         if step < tolerance:
             converged = True
             break

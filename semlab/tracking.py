@@ -51,6 +51,7 @@ from .subpixel import (
     _keys_taps,
     estimate_noise,
     five_point_gradients,
+    gauss_newton_setup,
     gauss_newton_translation,
     gradient_subpixel_shift,
     sample_shifted_filtered,
@@ -393,6 +394,7 @@ class Tracker:
                 "_weights", "_inside", "_tws_values", "_sgx", "_sgy", "_tw_values", "_gx", "_gy", "_t_var",
                 "_instrument_s", "_instrument", "_t_values")}
             self._arrays.update(stage1)
+            self._setups = self._gn_setups(self._arrays)
             f = self.coarse_factor
             h, w = self.template.shape
             hc, wc = h - h % f, w - w % f
@@ -496,12 +498,25 @@ class Tracker:
         # Block-averaging by f maps both images alike: an offset k in the small image is f·k.
         return np.array([wx + f * px - self.roi[0], wy + f * py - self.roi[1]])
 
+    def _gn_setups(self, arrays):
+        """The per-template constants of every Gauss–Newton stage (:func:`gauss_newton_setup`)."""
+        common = {"weights": arrays["_weights"], "photometric": self.photometric}
+        try:
+            setups = {"fine": gauss_newton_setup(arrays["_tw_values"], arrays["_gx"], arrays["_gy"], **common,
+                                                 regions=arrays["_inside"] if self.photometry == "regions" else None)}
+            for k in range(len(self._stage1_sigmas) if self.coarse_sigma > 0 else 0):
+                setups[k] = gauss_newton_setup(arrays[f"_s{k}_values"], arrays[f"_s{k}_gx"], arrays[f"_s{k}_gy"],
+                                               **common, regions=arrays["_inside"])
+        except ValueError:
+            return {}  # a template without two levels: every fit says why
+        return setups
+
     def _band_crop(self, arr, shift, margin, at):
         """The whitened crop of ``arr`` around the band at ``shift`` (``margin`` px each side).
 
         Returns the float32 crop, its whitened version, the band points in crop coordinates at
-        zero shift, the per-point arrays (band pixels that have left the image dropped) and the
-        crop's integer shift.
+        zero shift, the per-point arrays (band pixels that have left the image dropped), the
+        crop's integer shift and the Gauss–Newton set-ups for those points.
         """
         x0, y0 = self.roi[0] - at[0], self.roi[1] - at[1]
         bx0, by0, bx1, by1 = self._bbox
@@ -515,16 +530,21 @@ class Tracker:
         rho = self.noise.rho if self.whiten else 0.0
         cw = whiten_lines(crop, rho)
         pts = self._points + (x0 - cx0, y0 - cy0)
-        arrays = self._arrays
-        # Band pixels that have left the image (the object near its border) drop out.
-        px0, py0 = pts[:, 0] + shift[0], pts[:, 1] + shift[1]
-        valid = (px0 >= 3) & (py0 >= 3) & (px0 <= cw.shape[1] - 4) & (py0 <= cw.shape[0] - 4)
-        if not valid.all():
-            if valid.mean() < 0.5 or valid.sum() < 10:
-                raise ValueError("the target has left the image")
-            pts = pts[valid]
-            arrays = {k: (v[valid] if isinstance(v, np.ndarray) else v) for k, v in arrays.items()}
-        return crop, cw, pts, arrays, np.array([sx, sy], float)
+        arrays, setups = self._arrays, self._setups
+        # Band pixels that have left the image (the object near its border) drop out; the band's
+        # bounding box tells whether any has.
+        lo_x, lo_y = bx0 + x0 - cx0 + shift[0], by0 + y0 - cy0 + shift[1]
+        hi_x, hi_y = bx1 - 1 + x0 - cx0 + shift[0], by1 - 1 + y0 - cy0 + shift[1]
+        if not (lo_x >= 3 and lo_y >= 3 and hi_x <= cw.shape[1] - 4 and hi_y <= cw.shape[0] - 4):
+            px0, py0 = pts[:, 0] + shift[0], pts[:, 1] + shift[1]
+            valid = (px0 >= 3) & (py0 >= 3) & (px0 <= cw.shape[1] - 4) & (py0 <= cw.shape[0] - 4)
+            if not valid.all():
+                if valid.mean() < 0.5 or valid.sum() < 10:
+                    raise ValueError("the target has left the image")
+                pts = pts[valid]
+                arrays = {k: (v[valid] if isinstance(v, np.ndarray) else v) for k, v in arrays.items()}
+                setups = {}
+        return crop, cw, pts, arrays, np.array([sx, sy], float), setups
 
     def _fit(self, arr, shift0, gain0, offset0, margin=12, at=(0, 0), robust_start=True, max_move=None):
         """Gauss–Newton on the contour band of the whitened crop around ``shift0``.
@@ -535,7 +555,7 @@ class Tracker:
         the band would sample the crop's replicated border.
         """
         reach = margin - 3
-        crop, cw, pts, arrays, centre = self._band_crop(arr, shift0, margin, at)
+        crop, cw, pts, arrays, centre, setups = self._band_crop(arr, shift0, margin, at)
         two_level = self.photometry == "regions"
         common = {"weights": arrays["_weights"], "huber": self.huber, "photometric": self.photometric,
                   "regions": arrays["_inside"] if two_level else None}
@@ -553,7 +573,7 @@ class Tracker:
                                                  max_iterations=self.max_iterations, tolerance=0.02,
                                                  weights=arrays["_weights"], huber=self.huber,
                                                  photometric=self.photometric, regions=arrays["_inside"],
-                                                 max_move=room)
+                                                 max_move=room, setup=setups.get(k))
                 if first.converged and abs(first.gain) > 0.05:
                     shift0, gain0, offset0 = first.shift, first.gain, first.offset
                 elif np.max(np.abs(first.shift - shift0)) > room:
@@ -564,7 +584,7 @@ class Tracker:
                 return first, 0.0
             if np.any(np.round(shift0) != centre):
                 # Stage 2 in a crop centred on its start (the same pixels, whitened alike).
-                crop, cw, pts, arrays, centre = self._band_crop(arr, shift0, margin, at)
+                crop, cw, pts, arrays, centre, setups = self._band_crop(arr, shift0, margin, at)
                 common = {"weights": arrays["_weights"], "huber": self.huber, "photometric": self.photometric,
                           "regions": arrays["_inside"] if two_level else None}
         # Stage 2, full resolution: the efficient estimate. A strongly smoothed Jacobian (young
@@ -576,7 +596,7 @@ class Tracker:
                                        curvature=curvature,
                                        template_variance=None if (two_level or iv) else arrays["_t_var"],
                                        instrument=arrays["_instrument"] if iv else None,
-                                       max_move=limit, **common)
+                                       max_move=limit, setup=setups.get("fine"), **common)
         moved = float(np.max(np.abs(fit.shift - np.asarray(shift0, float)))) if np.all(np.isfinite(fit.shift)) else np.inf
         if moved > limit:
             fit.converged = False
