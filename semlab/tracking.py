@@ -65,6 +65,8 @@ __all__ = ["DEFAULT_METHOD", "METHODS", "TrackResult", "Tracker", "track"]
 METHODS = ("ic", "contour", "ssd", "hb")
 #: The method :class:`Tracker` uses unless told otherwise: the best measured combination.
 DEFAULT_METHOD = "ic"
+#: Step (px) below which each smoothed level of the "ic" first stage stops (widest first).
+STAGE1_TOLERANCE = (0.1, 0.05, 0.02)
 
 
 @dataclass(frozen=True)
@@ -564,24 +566,23 @@ class Tracker:
             # Stage 1, coarse to fine, both images smoothed alike (σ = 4, 2, 1 × coarse_sigma): a
             # wide basin and a smooth cost, so a start several px off (a bad prediction, a coarse
             # peak slid along a straight edge) or a noisy one-frame template still converges.
-            ran_off = 0
             for k, sigma in enumerate(self._stage1_sigmas):
                 smooth = cv2.GaussianBlur(cw, (0, 0), sigma)
                 values, sgx, sgy = (arrays[f"_s{k}_values"], arrays[f"_s{k}_gx"], arrays[f"_s{k}_gy"])
                 room = reach - float(np.max(np.abs(np.asarray(shift0, float) - centre)))
+                # The smoothed levels only have to bring the next one into its basin.
                 first = gauss_newton_translation(smooth, pts, values, sgx, sgy, shift0, gain0=gain0, offset0=offset0,
-                                                 max_iterations=self.max_iterations, tolerance=0.02,
+                                                 max_iterations=self.max_iterations,
+                                                 tolerance=STAGE1_TOLERANCE[min(k, len(STAGE1_TOLERANCE) - 1)],
                                                  weights=arrays["_weights"], huber=self.huber,
                                                  photometric=self.photometric, regions=arrays["_inside"],
                                                  max_move=room, setup=setups.get(k))
                 if first.converged and abs(first.gain) > 0.05:
                     shift0, gain0, offset0 = first.shift, first.gain, first.offset
-                elif np.max(np.abs(first.shift - shift0)) > room:
-                    ran_off += 1
-            if ran_off == len(self._stage1_sigmas):
-                # The start is farther off than the crop reaches at every scale: a job for the
-                # coarse search, not for a fit in the wrong place.
-                return first, 0.0
+                elif k == 0 and np.max(np.abs(first.shift - shift0)) > room:
+                    # The widest basin leaves the crop: the start is farther off than the crop
+                    # reaches, a job for the coarse search, not for a fit in the wrong place.
+                    return first, 0.0
             if np.any(np.round(shift0) != centre):
                 # Stage 2 in a crop centred on its start (the same pixels, whitened alike).
                 crop, cw, pts, arrays, centre, setups = self._band_crop(arr, shift0, margin, at)
