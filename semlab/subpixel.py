@@ -275,7 +275,8 @@ def whiten_lines(image, rho: float) -> np.ndarray:
     if rho == 0:
         return img.copy()
     out = np.empty_like(img)
-    out[:, 1:] = img[:, 1:] - np.float32(rho) * img[:, :-1]
+    np.multiply(img[:, :-1], np.float32(-rho), out=out[:, 1:])
+    out[:, 1:] += img[:, 1:]
     out[:, 0] = (1.0 - rho) * img[:, 0]
     return out
 
@@ -614,7 +615,8 @@ def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=N
         # Huber re-weighting can make the last digits wander: a step well below a tenth of a
         # pixel after max_iterations still counts as converged.
         converged = step < 10 * tolerance
-    return GaussNewtonResult(shift=p, gain=g, offset=o, weights=robust, inliers=float(np.mean(robust >= 1.0)),
+    return GaussNewtonResult(shift=p, gain=g, offset=o, weights=robust,
+                             inliers=np.count_nonzero(robust >= 1.0) / robust.size,
                              iterations=it, converged=converged,
                              samples=samples if samples is not None else np.full_like(t, np.nan))
 

@@ -295,6 +295,7 @@ class Tracker:
         self.gain, self.offset = 1.0, 0.0
         self.lost = False
         self._scores: list[float] = []
+        self._score_median = (0, float("nan"))
         self._last_prediction_error = np.inf
         self.n_lost = 0
         self._prepare_template()
@@ -339,7 +340,18 @@ class Tracker:
         self._t_values = self.template[ys, xs].astype(np.float64)
         if self.method == "ic":
             rho = self.noise.rho if self.whiten else 0.0
-            tw = whiten_lines(self.template, rho)
+            # Only the band's neighbourhood is filtered (the widest kernel's reach around it):
+            # at the band the values are those of the whole template's filtering, 4x cheaper.
+            reach = int(np.ceil(4.0 * max(4.0 * self.coarse_sigma, self.coarse_sigma + 1.5,
+                                          self.jacobian_sigma_first, self.normal_sigma, 1.0))) + 3
+            th, tw_ = self.template.shape
+            bx0, by0, bx1, by1 = self._bbox
+            sx0, sy0 = max(bx0 - reach, 0), max(by0 - reach, 0)
+            sx1, sy1 = min(bx1 + reach, tw_), min(by1 + reach, th)
+            template = np.ascontiguousarray(self.template[sy0:sy1, sx0:sx1])
+            # Whitened whole, then cut: the same first column.
+            tw = np.ascontiguousarray(whiten_lines(self.template, rho)[sy0:sy1, sx0:sx1])
+            yb, xb = ys - sy0, xs - sx0
             # Gradients by eq. 8's 5-point mask of the lightly smoothed template: a noisy Jacobian
             # inflates the variance along the weakly constrained direction (along the shaft, only
             # the apex tells x); the curvature then comes from the image (see _fit).
@@ -357,18 +369,18 @@ class Tracker:
                 # Keep only the gradient's component along the edge normal, whose direction
                 # comes from the heavily smoothed template: noise across the normal would leak
                 # into x along a near-horizontal shaft, whose only x information is its apex.
-                nx, ny = five_point_gradients(cv2.GaussianBlur(self.template, (0, 0), self.normal_sigma))
+                nx, ny = five_point_gradients(cv2.GaussianBlur(template, (0, 0), self.normal_sigma))
                 norm = np.hypot(nx, ny) + 1e-12
                 nx, ny = nx / norm, ny / norm
                 along = gx * nx + gy * ny
                 gx, gy = along * nx, along * ny
-            self._tw_values = tw[ys, xs].astype(np.float64)
-            self._gx, self._gy = gx[ys, xs].astype(np.float64), gy[ys, xs].astype(np.float64)
+            self._tw_values = tw[yb, xb].astype(np.float64)
+            self._gx, self._gy = gx[yb, xb].astype(np.float64), gy[yb, xb].astype(np.float64)
             # The same, smoothed: the first, robust stage of every frame's registration.
             tws = cv2.GaussianBlur(tw, (0, 0), self.coarse_sigma) if self.coarse_sigma > 0 else tw
             sgx, sgy = five_point_gradients(tws)
-            self._tws_values = tws[ys, xs].astype(np.float64)
-            self._sgx, self._sgy = sgx[ys, xs].astype(np.float64), sgy[ys, xs].astype(np.float64)
+            self._tws_values = tws[yb, xb].astype(np.float64)
+            self._sgx, self._sgy = sgx[yb, xb].astype(np.float64), sgy[yb, xb].astype(np.float64)
             self._inside = self.contour.region[ys, xs]
             # Noise variance of the (whitened, averaged) template at the band pixels, and the
             # factor by which the first stage's smoothing reduces it.
@@ -379,15 +391,15 @@ class Tracker:
             for k, sigma in enumerate(self._stage1_sigmas if self.coarse_sigma > 0 else ()):
                 ts = cv2.GaussianBlur(tw, (0, 0), sigma)
                 s_gx, s_gy = five_point_gradients(ts)
-                stage1[f"_s{k}_values"] = ts[ys, xs].astype(np.float64)
-                stage1[f"_s{k}_gx"], stage1[f"_s{k}_gy"] = s_gx[ys, xs].astype(np.float64), s_gy[ys, xs].astype(np.float64)
+                stage1[f"_s{k}_values"] = ts[yb, xb].astype(np.float64)
+                stage1[f"_s{k}_gx"], stage1[f"_s{k}_gy"] = s_gx[yb, xb].astype(np.float64), s_gy[yb, xb].astype(np.float64)
             # The instrument for the gain: the template smoothed (its own noise mostly averaged out).
             iv = self.photometry == "instrument"
-            self._instrument = cv2.GaussianBlur(tw, (0, 0), 1.5)[ys, xs].astype(np.float64) if iv else None
-            self._instrument_s = cv2.GaussianBlur(tws, (0, 0), 1.5)[ys, xs].astype(np.float64) if iv else None
-            self._gx, self._gy = gx[ys, xs].astype(np.float64), gy[ys, xs].astype(np.float64)
+            self._instrument = cv2.GaussianBlur(tw, (0, 0), 1.5)[yb, xb].astype(np.float64) if iv else None
+            self._instrument_s = cv2.GaussianBlur(tws, (0, 0), 1.5)[yb, xb].astype(np.float64) if iv else None
+            self._gx, self._gy = gx[yb, xb].astype(np.float64), gy[yb, xb].astype(np.float64)
             if self.noise_weights:
-                level = cv2.GaussianBlur(self.template, (0, 0), 1.0)[ys, xs]
+                level = cv2.GaussianBlur(template, (0, 0), 1.0)[yb, xb]
                 var = self.noise.variance(level)
                 self._weights = var.min() / var
             else:
@@ -477,6 +489,10 @@ class Tracker:
     def _band_inside(self, shift, shape, margin=2, fraction=1.0) -> bool:
         """Whether at least ``fraction`` of the band lies ``margin`` px inside the image at ``shift``."""
         x0, y0 = self.roi[:2]
+        bx0, by0, bx1, by1 = self._bbox
+        if (bx0 + x0 + shift[0] >= margin and by0 + y0 + shift[1] >= margin
+                and bx1 - 1 + x0 + shift[0] <= shape[1] - 1 - margin and by1 - 1 + y0 + shift[1] <= shape[0] - 1 - margin):
+            return True  # the band's bounding box is inside
         px = self._points[:, 0] + x0 + shift[0]
         py = self._points[:, 1] + y0 + shift[1]
         inside = (px >= margin) & (py >= margin) & (px <= shape[1] - 1 - margin) & (py <= shape[0] - 1 - margin)
@@ -609,13 +625,19 @@ class Tracker:
 
     def _threshold(self) -> float:
         if self._scores:
-            return max(self.min_score, self.min_relative_score * float(np.median(self._scores)))
+            return max(self.min_score, self.min_relative_score * self._median_score())
         return self.min_score
+
+    def _median_score(self) -> float:
+        """Median of the first frames' scores (cached: the list only grows, to 10)."""
+        if self._score_median[0] != len(self._scores):
+            self._score_median = (len(self._scores), float(np.median(self._scores)))
+        return self._score_median[1]
 
     def _update_ic(self, arr) -> TrackResult:
         predicted = self.shift + self.velocity
         fit, score, good = None, 0.0, False
-        typical = 0.9 * float(np.median(self._scores)) if self._scores else 1.0
+        typical = 0.9 * self._median_score() if self._scores else 1.0
         if not self.lost:
             # The constant-velocity prediction first: while tracking it is within a fraction of
             # a pixel (then the smoothed first stage is skipped) or a few px (a change of speed).
