@@ -16,6 +16,8 @@ import time
 import numpy as np
 import pandas as pd
 
+from semlab.metrics import run_tracker
+from semlab.peers import MatchTemplatePeer
 from semlab.sim import make_sequence
 from semlab.tracking import Tracker
 
@@ -51,6 +53,13 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     print(f"# {args.sequence}: ms per update by kind of frame (median of 3 runs per frame)")
     print(profile(args.sequence).round(3).to_string())
+    seq = make_sequence(args.sequence, seed=0)
+    duel = {"Tracker()": [], "opencv TM_CCOEFF_NORMED": []}
+    for _ in range(3):
+        duel["Tracker()"].append(run_tracker(Tracker(), seq.frames, seq.roi)[1])
+        duel["opencv TM_CCOEFF_NORMED"].append(run_tracker(MatchTemplatePeer("TM_CCOEFF_NORMED"), seq.frames, seq.roi)[1])
+    print("# ms per frame, median of 3 interleaved runs: "
+          + ", ".join(f"{k} {np.median(v):.2f}" for k, v in duel.items()))
     if args.cprofile:
         seq = make_sequence(args.sequence, seed=0)
         t = Tracker()

@@ -298,6 +298,7 @@ class Tracker:
         self._score_median = (0, float("nan"))
         self._last_prediction_error = np.inf
         self.n_lost = 0
+        self._small_mask = None
         self._prepare_template()
         self._contour_offset = (0, 0)
         if self.method == "contour":
@@ -415,11 +416,14 @@ class Tracker:
             self._small = cv2.resize(self.template[:hc, :wc], (wc // f, hc // f), interpolation=cv2.INTER_AREA)
             # The coarse search sees the object and its immediate surroundings only, so that static
             # background in the ROI does not pull the match back when the probe moves.
-            k = 8 * f + 1
-            region = cv2.dilate((self.contour.region | self.band).astype(np.uint8),
-                                cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k)))
-            mask = cv2.resize(region[:hc, :wc].astype(np.float32), (wc // f, hc // f),
-                              interpolation=cv2.INTER_AREA) > 0.5
+            # (The contour and the band are those of frame 0: the mask is made once.)
+            if self._small_mask is None:
+                k = 8 * f + 1
+                region = cv2.dilate((self.contour.region | self.band).astype(np.uint8),
+                                    cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k)))
+                self._small_mask = cv2.resize(region[:hc, :wc].astype(np.float32), (wc // f, hc // f),
+                                              interpolation=cv2.INTER_AREA) > 0.5
+            mask = self._small_mask
             if mask.sum() >= 4 and np.ptp(self._small[mask]) > 0:
                 # Outside the object's neighbourhood the template is flat (its mean there), so
                 # it adds nothing to the correlation's numerator: a mask at the price of none.
