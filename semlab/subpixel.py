@@ -382,7 +382,8 @@ def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=N
                              huber: float | None = 2.0, photometric: bool = True, regions=None,
                              exact: bool = True, curvature=None, tukey: bool = False,
                              template_variance=None, instrument=None, freeze: float = 0.01,
-                             max_move: float = np.inf, setup: dict | None = None) -> GaussNewtonResult:
+                             max_move: float = np.inf, setup: dict | None = None,
+                             early_stop: bool = False) -> GaussNewtonResult:
     """Inverse-compositional Gauss–Newton for a translation with gain/offset (beyond eq. 9).
 
     Minimises ``Σ wᵢ ρ(I(xᵢ + p) − g·T(xᵢ) − o)`` over the template pixels ``xᵢ`` (eq. 2 with a
@@ -456,6 +457,10 @@ def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=N
     setup : dict, optional
         :func:`gauss_newton_setup` of the same ``values, gx, gy, weights, regions,
         photometric`` (the template's constants, computed once by the caller).
+    early_stop : bool
+        Stop as well when the next update, extrapolated from the last two (shrinking by a
+        factor of at most 0.6), would be below ``tolerance``: one iteration fewer, the answer
+        within about ``tolerance`` of where the full iteration ends.
 
     Returns
     -------
@@ -605,8 +610,11 @@ def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=N
             o += delta[3]
         if abs(g) < 1e-6:
             break
-        step = damping * math.hypot(dx, dy)
-        if step < tolerance:
+        last_step, step = step, damping * math.hypot(dx, dy)
+        # Near the answer the steps shrink geometrically: stop as well when the next one,
+        # extrapolated from the last two, would be below the tolerance.
+        if step < tolerance or (early_stop and it > 1 and step < 0.6 * last_step
+                                and step * step < tolerance * last_step):
             converged = True
             break
         if max(abs(p[0] - start[0]), abs(p[1] - start[1])) > max_move:

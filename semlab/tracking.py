@@ -582,6 +582,9 @@ class Tracker:
         common = {"weights": arrays["_weights"], "huber": self.huber, "photometric": self.photometric,
                   "regions": arrays["_inside"] if two_level else None}
         iv = self.photometry == "instrument"
+        # A young (noisy, strongly smoothed) template's iterations do not shrink geometrically
+        # (the image's curvature, the gain following the levels): they run to the tolerance.
+        mature = self._sigma_j <= 1.0
         if self.coarse_sigma > 0 and robust_start:
             # Stage 1, coarse to fine, both images smoothed alike (σ = 4, 2, 1 × coarse_sigma): a
             # wide basin and a smooth cost, so a start several px off (a bad prediction, a coarse
@@ -596,7 +599,7 @@ class Tracker:
                                                  tolerance=STAGE1_TOLERANCE[min(k, len(STAGE1_TOLERANCE) - 1)],
                                                  weights=arrays["_weights"], huber=self.huber,
                                                  photometric=self.photometric, regions=arrays["_inside"],
-                                                 max_move=room, setup=setups.get(k))
+                                                 max_move=room, setup=setups.get(k), early_stop=mature)
                 if first.converged and abs(first.gain) > 0.05:
                     shift0, gain0, offset0 = first.shift, first.gain, first.offset
                 elif k == 0 and np.max(np.abs(first.shift - shift0)) > room:
@@ -610,14 +613,15 @@ class Tracker:
                           "regions": arrays["_inside"] if two_level else None}
         # Stage 2, full resolution: the efficient estimate. A strongly smoothed Jacobian (young
         # template) takes its curvature from the image; a light one is close enough to exact.
-        curvature = five_point_gradients(cw) if self._sigma_j > 1.0 else None
+        curvature = None if mature else five_point_gradients(cw)
         limit = reach if max_move is None else min(reach, max_move)
         fit = gauss_newton_translation(cw, pts, arrays["_tw_values"], arrays["_gx"], arrays["_gy"], shift0,
                                        gain0=gain0, offset0=offset0, max_iterations=self.max_iterations,
                                        curvature=curvature,
                                        template_variance=None if (two_level or iv) else arrays["_t_var"],
                                        instrument=arrays["_instrument"] if iv else None,
-                                       max_move=limit, setup=setups.get("fine"), **common)
+                                       max_move=limit, setup=setups.get("fine"),
+                                       early_stop=mature, **common)
         moved = float(np.max(np.abs(fit.shift - np.asarray(shift0, float)))) if np.all(np.isfinite(fit.shift)) else np.inf
         if moved > limit:
             fit.converged = False
