@@ -589,7 +589,9 @@ class Tracker:
             # Stage 1, coarse to fine, both images smoothed alike (σ = 4, 2, 1 × coarse_sigma): a
             # wide basin and a smooth cost, so a start several px off (a bad prediction, a coarse
             # peak slid along a straight edge) or a noisy one-frame template still converges.
-            for k, sigma in enumerate(self._stage1_sigmas):
+            # With an averaged template the full-resolution stage takes over from σ = 2 × coarse_sigma
+            # (its basin reaches that far); a young, noisy one needs the last smoothed level too.
+            for k, sigma in enumerate(self._stage1_sigmas[:2] if mature else self._stage1_sigmas):
                 smooth = cv2.GaussianBlur(cw, (0, 0), sigma)
                 values, sgx, sgy = (arrays[f"_s{k}_values"], arrays[f"_s{k}_gx"], arrays[f"_s{k}_gy"])
                 room = reach - float(np.max(np.abs(np.asarray(shift0, float) - centre)))
