@@ -390,8 +390,11 @@ class Tracker:
             self._stage1_sigmas = (4.0 * self.coarse_sigma, 2.0 * self.coarse_sigma, self.coarse_sigma)
             stage1 = {}
             for k, sigma in enumerate(self._stage1_sigmas if self.coarse_sigma > 0 else ()):
-                ts = cv2.GaussianBlur(tw, (0, 0), sigma)
-                s_gx, s_gy = five_point_gradients(ts)
+                if sigma == self.coarse_sigma:
+                    ts, s_gx, s_gy = tws, sgx, sgy  # the finest level is the smoothed template above
+                else:
+                    ts = cv2.GaussianBlur(tw, (0, 0), sigma)
+                    s_gx, s_gy = five_point_gradients(ts)
                 stage1[f"_s{k}_values"] = ts[yb, xb].astype(np.float64)
                 stage1[f"_s{k}_gx"], stage1[f"_s{k}_gy"] = s_gx[yb, xb].astype(np.float64), s_gy[yb, xb].astype(np.float64)
             # The instrument for the gain: the template smoothed (its own noise mostly averaged out).
