@@ -571,13 +571,17 @@ class Tracker:
                 setups = {}
         return crop, cw, pts, arrays, np.array([sx, sy], float), setups
 
-    def _fit(self, arr, shift0, gain0, offset0, margin=12, at=(0, 0), robust_start=True, max_move=None):
+    def _fit(self, arr, shift0, gain0, offset0, margin=12, at=(0, 0), robust_start=True, max_move=None,
+             give_up=False):
         """Gauss–Newton on the contour band of the whitened crop around ``shift0``.
 
         ``arr`` is the frame, or a part of it whose pixel [0, 0] is the frame's pixel ``at``.
         A fit whose translation would take the band more than ``margin − 3`` px from the crop
-        it was started in (or moves more than ``max_move`` px) stops there, unconverged: beyond,
-        the band would sample the crop's replicated border.
+        it was started in (beyond, the band would sample the crop's replicated border) stops
+        there: a smoothed level then goes on in a crop centred where it got to (twice at most),
+        or, with ``give_up`` (a start that is only a prediction), the widest level gives up at
+        once and the fit returns unconverged, for the coarse search. The full-resolution stage
+        stops unconverged there or after ``max_move`` px.
         """
         reach = margin - 3
         crop, cw, pts, arrays, centre, setups = self._band_crop(arr, shift0, margin, at)
@@ -594,7 +598,10 @@ class Tracker:
             # peak slid along a straight edge) or a noisy one-frame template still converges.
             # With an averaged template the full-resolution stage takes over from σ = 2 × coarse_sigma
             # (its basin reaches that far); a young, noisy one needs the last smoothed level too.
-            for k, sigma in enumerate(self._stage1_sigmas[:2] if mature else self._stage1_sigmas):
+            levels = list(enumerate(self._stage1_sigmas[:2] if mature else self._stage1_sigmas))
+            recrops = 2
+            while levels:
+                k, sigma = levels[0]
                 smooth = cv2.GaussianBlur(cw, (0, 0), sigma)
                 values, sgx, sgy = (arrays[f"_s{k}_values"], arrays[f"_s{k}_gx"], arrays[f"_s{k}_gy"])
                 room = reach - float(np.max(np.abs(np.asarray(shift0, float) - centre)))
@@ -607,10 +614,21 @@ class Tracker:
                                                  max_move=room, setup=setups.get(k), early_stop=mature)
                 if first.converged and abs(first.gain) > 0.05:
                     shift0, gain0, offset0 = first.shift, first.gain, first.offset
-                elif k == 0 and np.max(np.abs(first.shift - shift0)) > room:
-                    # The widest basin leaves the crop: the start is farther off than the crop
-                    # reaches, a job for the coarse search, not for a fit in the wrong place.
-                    return first, 0.0
+                elif np.max(np.abs(first.shift - shift0)) > room:
+                    if give_up and k == 0:
+                        # The widest basin leaves the crop: the prediction is farther off than
+                        # the crop reaches, a job for the coarse search.
+                        return first, 0.0
+                    if recrops and np.all(np.isfinite(first.shift)):
+                        recrops -= 1
+                        try:
+                            crop, cw, pts, arrays, centre, setups = self._band_crop(arr, first.shift, margin, at)
+                        except ValueError:
+                            recrops = 0
+                        else:
+                            shift0 = first.shift
+                            continue  # the same level again, in a crop centred where it got to
+                levels.pop(0)
             if np.any(np.round(shift0) != centre):
                 # Stage 2 in a crop centred on its start (the same pixels, whitened alike).
                 crop, cw, pts, arrays, centre, setups = self._band_crop(arr, shift0, margin, at)
@@ -658,9 +676,9 @@ class Tracker:
             # A steady fit that has to move more than a few px is a change of speed: the
             # smoothed stage is the tool then, not 20 crawling full-resolution iterations.
             fit, score = self._fit(arr, predicted, self.gain, self.offset, robust_start=not steady,
-                                   max_move=3.0 if steady else None)
+                                   max_move=3.0 if steady else None, give_up=True)
             if steady and not fit.converged:
-                fit, score = self._fit(arr, predicted, self.gain, self.offset)
+                fit, score = self._fit(arr, predicted, self.gain, self.offset, give_up=True)
             good = fit.converged and score >= max(self._threshold(), typical)
         if not good:
             # A jump, a poor match or a lost target: the coarse search over the window (the
