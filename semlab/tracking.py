@@ -589,8 +589,9 @@ class Tracker:
         common = {"weights": arrays["_weights"], "huber": self.huber, "photometric": self.photometric,
                   "regions": arrays["_inside"] if two_level else None}
         iv = self.photometry == "instrument"
-        # A young (noisy, strongly smoothed) template's iterations do not shrink geometrically
-        # (the image's curvature, the gain following the levels): they run to the tolerance.
+        # An averaged template (lightly smoothed Jacobian): the iterations shrink geometrically and
+        # may stop one early (early_stop). A young, noisy one takes its curvature from the image,
+        # and its iterations, which do not shrink so regularly, run to the tolerance.
         mature = self._sigma_j <= 1.0
         if self.coarse_sigma > 0 and robust_start:
             # Stage 1, coarse to fine, both images smoothed alike (σ = 4, 2, 1 × coarse_sigma): a
