@@ -12,6 +12,7 @@ close to the Cramér–Rao bound of an SEM frame whose noise is correlated along
 from __future__ import annotations
 
 import itertools
+import math
 from dataclasses import dataclass
 
 import cv2
@@ -23,6 +24,7 @@ __all__ = [
     "NoiseModel",
     "estimate_noise",
     "five_point_gradients",
+    "gauss_newton_setup",
     "gauss_newton_translation",
     "gradient_subpixel_shift",
     "sample_bicubic",
@@ -273,7 +275,8 @@ def whiten_lines(image, rho: float) -> np.ndarray:
     if rho == 0:
         return img.copy()
     out = np.empty_like(img)
-    out[:, 1:] = img[:, 1:] - np.float32(rho) * img[:, :-1]
+    np.multiply(img[:, :-1], np.float32(-rho), out=out[:, 1:])
+    out[:, 1:] += img[:, 1:]
     out[:, 0] = (1.0 - rho) * img[:, 0]
     return out
 
@@ -320,11 +323,67 @@ def _absorb(grad, inside, ind_in, ind_out):
     return grad - inside * (mean_in - mean_out) - mean_out
 
 
+def _median(x) -> float:
+    """``np.median`` of a 1-D array without its overhead (the same value)."""
+    n = x.size
+    k = n // 2
+    if n % 2:
+        return float(np.partition(x, k)[k])
+    part = np.partition(x, [k - 1, k])
+    return 0.5 * (float(part[k - 1]) + float(part[k]))
+
+
+def gauss_newton_setup(values, gx, gy, *, weights=None, regions=None, photometric: bool = True) -> dict:
+    """What :func:`gauss_newton_translation` derives from the template alone, computed once.
+
+    A tracker registers every frame against the same template pixels: passing this as
+    ``setup=`` saves rebuilding the same products at every call. The arguments mean the same as
+    in :func:`gauss_newton_translation` and must be the same arrays.
+    """
+    t = np.asarray(values, np.float64)
+    tx, ty = np.asarray(gx, np.float64), np.asarray(gy, np.float64)
+    prior = np.ones_like(t) if weights is None else np.asarray(weights, np.float64)
+    out = {"t": t, "tx": tx, "ty": ty, "prior": prior, "sqrt_prior": np.sqrt(prior)}
+    joint = photometric and regions is None
+    two_level = photometric and regions is not None
+    if two_level:
+        inside = np.asarray(regions, bool)
+        n_in = int(inside.sum())
+        if n_in == 0 or n_in == len(inside):
+            raise ValueError("regions must mark both object and background pixels")
+        ind_in = inside / n_in
+        ind_out = ~inside / (len(inside) - n_in)
+        if float(t @ ind_in) == float(t @ ind_out):
+            raise ValueError("the template has no contrast between object and background")
+        outside = (~inside).astype(np.float64)
+        inside_f = inside.astype(np.float64)
+        # Σ r·[inside·t, outside·t, inside, outside] for robust weights r: the weighted region
+        # means of the template in one product.
+        out.update(inside=inside, ind_in=ind_in, ind_out=ind_out,
+                   levels=np.stack([inside_f * t, outside * t, inside_f, outside], axis=1),
+                   regions2=np.stack([inside_f, outside], axis=1))
+    if not joint:
+        # Everything but the robust weights is fixed during the iteration, so the 2×2 normal
+        # matrix is g²·Σ robust·(prior·J·E) with E the plain or the level-absorbed gradient
+        # (_absorb is linear: absorbing g·T_x is g times absorbing T_x), and the right-hand
+        # side g·Σ (robust·residual)·(prior·J): one matrix-vector product each.
+        ptx, pty = prior * tx, prior * ty
+        out["plain_hess"] = np.stack([ptx * tx, ptx * ty, pty * tx, pty * ty], axis=1)
+        if two_level:
+            ax, ay = _absorb(tx, inside, ind_in, ind_out), _absorb(ty, inside, ind_in, ind_out)
+            out["absorbed_hess"] = np.stack([ptx * ax, ptx * ay, pty * ax, pty * ay], axis=1)
+        out["rhs_basis"] = np.stack([ptx, pty], axis=1)
+    out["key"] = (photometric, regions is None)
+    return out
+
+
 def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=None, gain0=1.0,
                              offset0=0.0, max_iterations: int = 20, tolerance: float = 2e-3,
                              huber: float | None = 2.0, photometric: bool = True, regions=None,
                              exact: bool = True, curvature=None, tukey: bool = False,
-                             template_variance=None, instrument=None, freeze: float = 0.01) -> GaussNewtonResult:
+                             template_variance=None, instrument=None, freeze: float = 0.01,
+                             max_move: float = np.inf, setup: dict | None = None,
+                             early_stop: bool = False) -> GaussNewtonResult:
     """Inverse-compositional Gauss–Newton for a translation with gain/offset (beyond eq. 9).
 
     Minimises ``Σ wᵢ ρ(I(xᵢ + p) − g·T(xᵢ) − o)`` over the template pixels ``xᵢ`` (eq. 2 with a
@@ -391,36 +450,59 @@ def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=N
         template gradient — lower variance when the template is noisy — without the overshoot
         that the smaller smoothed gradients would otherwise cause.
 
+    max_move : float
+        Give up (``converged=False``) as soon as the translation has moved more than this many
+        px (in x or y) from ``shift0``: a caller that rejects such fits need not wait for
+        ``max_iterations``.
+    setup : dict, optional
+        :func:`gauss_newton_setup` of the same ``values, gx, gy, weights, regions,
+        photometric`` (the template's constants, computed once by the caller).
+    early_stop : bool
+        Stop as well when the next update, extrapolated from the last two (shrinking by a
+        factor of at most 0.6), would be below ``tolerance``: one iteration fewer, the answer
+        within about ``tolerance`` of where the full iteration ends.
+
     Returns
     -------
     GaussNewtonResult
     """
     img = np.asarray(image, np.float32)
     pts = np.asarray(points, np.float64)
-    px, py = pts[:, 0].astype(np.float32), pts[:, 1].astype(np.float32)
+    if not exact or curvature is not None:
+        px, py = pts[:, 0].astype(np.float32), pts[:, 1].astype(np.float32)
     p = np.array(shift0, np.float64)
+    start = p.copy()
     g, o = float(gain0), float(offset0)
-    t = np.asarray(values, np.float64)
-    tx, ty = np.asarray(gx, np.float64), np.asarray(gy, np.float64)
-    prior = np.ones_like(t) if weights is None else np.asarray(weights, np.float64)
-    sqrt_prior = np.sqrt(prior)
+    if setup is None or setup["key"] != (photometric, regions is None):
+        setup = gauss_newton_setup(values, gx, gy, weights=weights, regions=regions, photometric=photometric)
+    t, tx, ty, prior, sqrt_prior = (setup[k] for k in ("t", "tx", "ty", "prior", "sqrt_prior"))
     joint = photometric and regions is None
     two_level = photometric and regions is not None
     if two_level:
-        inside = np.asarray(regions, bool)
-        n_in = int(inside.sum())
-        if n_in == 0 or n_in == len(inside):
-            raise ValueError("regions must mark both object and background pixels")
-        ind_in = inside / n_in
-        ind_out = ~inside / (len(inside) - n_in)
-        t_in, t_out = float(t @ ind_in), float(t @ ind_out)
-        if t_in == t_out:
-            raise ValueError("the template has no contrast between object and background")
+        inside, ind_in, ind_out, levels, regions2 = (setup[k] for k in ("inside", "ind_in", "ind_out", "levels",
+                                                                          "regions2"))
+    if not joint:
+        plain_hess, rhs_basis = setup["plain_hess"], setup["rhs_basis"]
+        absorbed_hess = setup.get("absorbed_hess")
+
+    if exact:
+        # The crop is filtered once per iteration; the band's flat indices are fixed.
+        rows, cols = img.shape
+        ix0, iy0 = pts[:, 0].astype(np.intp), pts[:, 1].astype(np.intp)
+        flat_base = iy0 * cols + ix0
+        # (Column by column: numpy's axis-0 reductions of an (N, 2) array are several times slower.)
+        lo_x, hi_x, lo_y, hi_y = int(ix0.min()), int(ix0.max()), int(iy0.min()), int(iy0.max())
 
     def sample(shift):
-        if exact:
-            return sample_shifted_filtered(img, pts, shift)
-        return _remap_points(img, px + np.float32(shift[0]), py + np.float32(shift[1]))
+        if not exact:
+            return _remap_points(img, px + np.float32(shift[0]), py + np.float32(shift[1]))
+        fx, fy = math.floor(shift[0]), math.floor(shift[1])
+        if not (lo_x + fx >= 0 and lo_y + fy >= 0 and hi_x + fx < cols and hi_y + fy < rows):
+            return sample_shifted_filtered(img, pts, shift)  # border replicated
+        wx, wy = _keys_taps(shift[0] - fx), _keys_taps(shift[1] - fy)
+        filtered = cv2.sepFilter2D(img, -1, wx.reshape(1, 4), wy.reshape(4, 1), anchor=(1, 1),
+                                   borderType=cv2.BORDER_REPLICATE)
+        return filtered.ravel().take(flat_base + (fy * cols + fx)).astype(np.float64)
 
     converged = False
     step = np.inf
@@ -437,34 +519,36 @@ def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=N
             # stay fixed (the means move with p, a coupling Gauss–Newton does not model). The
             # means are weighted by the robust weights, so occluders and clutter that fall into
             # the band do not pull the levels.
-            wi, wo = robust * inside, robust * ~inside
-            swi, swo = float(wi.sum()), float(wo.sum())
+            swt_in, swt_out, swi, swo = (robust @ levels).tolist()
             if swi <= 0 or swo <= 0:
                 break
-            ti, to = float(wi @ t) / swi, float(wo @ t) / swo
+            ti, to = swt_in / swi, swt_out / swo
             if ti == to:
                 break
-            g = (float(wi @ samples) / swi - float(wo @ samples) / swo) / (ti - to)
-            o = float(wo @ samples) / swo - g * to
+            si, so = ((robust * samples) @ regions2).tolist()
+            g = (si / swi - so / swo) / (ti - to)
+            o = so / swo - g * to
             if abs(g) < 1e-6:
                 break
         residual = samples - (g * t + o)
         if huber is not None:
             z = residual * sqrt_prior
             if spread is None:
-                spread = 1.4826 * float(np.median(np.abs(z - np.median(z)))) + 1e-9
+                spread = 1.4826 * _median(np.abs(z - _median(z))) + 1e-9
             if step > 0.05 or not tukey:
-                a = np.abs(z) / (huber * spread)
-                robust = np.minimum(1.0, 1.0 / np.maximum(a, 1e-12))
+                # min(1, c/|z|) with c = huber · spread.
+                c = huber * spread
+                robust = c / np.maximum(np.abs(z), c)
             else:
                 # Close to the answer, Tukey's biweight (c = 4.685 spreads, 95 % efficient for
                 # Gaussian noise) gives occluded pixels no influence at all, where Huber's only
                 # bounds it.
                 u = np.minimum(np.abs(z) / (4.685 * spread), 1.0)
                 robust = (1.0 - u * u) ** 2
-        w = prior * robust
-        jx, jy = g * tx, g * ty
-        wjx, wjy = w * jx, w * jy
+        if joint or (curvature is not None and block is None):
+            w = prior * robust
+            jx, jy = g * tx, g * ty
+            wjx, wjy = w * jx, w * jy
         if joint:
             jac = np.stack([jx, jy, t, np.ones_like(t)], axis=1)
             inst = jac if instrument is None else np.stack([jx, jy, instrument, np.ones_like(t)], axis=1)
@@ -480,10 +564,9 @@ def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=N
             # is the gradient minus what the levels absorb of it (region indicator, not the noisy
             # template, carries the levels). Only the step uses it; the estimating equation
             # Σ w J r = 0 keeps the plain template gradient, uncorrelated with the residual's noise.
-            ex, ey = (_absorb(jx, inside, ind_in, ind_out), _absorb(jy, inside, ind_in, ind_out)) if (
-                two_level and step > freeze) else (jx, jy)
-            hess = np.array([[wjx @ ex, wjx @ ey], [wjy @ ex, wjy @ ey]])
-            rhs = np.array([wjx @ residual, wjy @ residual])
+            basis = absorbed_hess if (two_level and step > freeze) else plain_hess
+            hess = (g * g * (robust @ basis)).reshape(2, 2)
+            rhs = g * ((robust * residual) @ rhs_basis)
         if curvature is not None:
             if block is None:
                 gix = _remap_points(curvature[0], px + np.float32(p[0]), py + np.float32(p[1]))
@@ -496,34 +579,54 @@ def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=N
                     block = False
             if block is not False:
                 hess[:2, :2] = block
-        try:
-            delta = np.linalg.solve(hess, rhs)
-        except np.linalg.LinAlgError:
-            break
-        if not np.all(np.isfinite(delta)):
-            break
+        if joint:
+            try:
+                delta = np.linalg.solve(hess, rhs)
+            except np.linalg.LinAlgError:
+                break
+            if not np.all(np.isfinite(delta)):
+                break
+            dx, dy = float(delta[0]), float(delta[1])
+        else:
+            # The 2×2 solve in closed form, on Python floats (cheaper than LAPACK at this size).
+            h00, h01, h10, h11 = hess.ravel().tolist()
+            r0, r1 = rhs.tolist()
+            det = h00 * h11 - h01 * h10
+            if det == 0:
+                break
+            dx, dy = (h11 * r0 - h01 * r1) / det, (h00 * r1 - h10 * r0) / det
+            if not (math.isfinite(dx) and math.isfinite(dy)):
+                break
         # A step that reverses a good part of a previous one longer than 0.1 px means the
         # linearisation overshoots (noisy Jacobian, a far start): halve the steps from then on.
-        d2 = delta[:2]
-        if prev is not None and float(prev @ prev) > 0.01 and float(d2 @ prev) < -0.25 * float(prev @ prev):
-            damping = max(0.5 * damping, 0.125)
-        prev = d2.copy()
+        if prev is not None:
+            pp = prev[0] * prev[0] + prev[1] * prev[1]
+            if pp > 0.01 and dx * prev[0] + dy * prev[1] < -0.25 * pp:
+                damping = max(0.5 * damping, 0.125)
+        prev = (dx, dy)
         # Inverse composition: the template moved by delta[:2], so the image position moves back.
-        p -= damping * d2
+        p[0] -= damping * dx
+        p[1] -= damping * dy
         if joint:
             g += delta[2]
             o += delta[3]
         if abs(g) < 1e-6:
             break
-        step = damping * float(np.hypot(d2[0], d2[1]))
-        if step < tolerance:
+        last_step, step = step, damping * math.hypot(dx, dy)
+        # Near the answer the steps shrink geometrically: stop as well when the next one,
+        # extrapolated from the last two, would be below the tolerance.
+        if step < tolerance or (early_stop and it > 1 and step < 0.6 * last_step
+                                and step * step < tolerance * last_step):
             converged = True
+            break
+        if max(abs(p[0] - start[0]), abs(p[1] - start[1])) > max_move:
             break
     else:
         # Huber re-weighting can make the last digits wander: a step well below a tenth of a
         # pixel after max_iterations still counts as converged.
         converged = step < 10 * tolerance
-    return GaussNewtonResult(shift=p, gain=g, offset=o, weights=robust, inliers=float(np.mean(robust >= 1.0)),
+    return GaussNewtonResult(shift=p, gain=g, offset=o, weights=robust,
+                             inliers=np.count_nonzero(robust >= 1.0) / robust.size,
                              iterations=it, converged=converged,
                              samples=samples if samples is not None else np.full_like(t, np.nan))
 

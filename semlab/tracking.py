@@ -55,6 +55,7 @@ from .subpixel import (
     _keys_taps,
     estimate_noise,
     five_point_gradients,
+    gauss_newton_setup,
     gauss_newton_translation,
     gradient_subpixel_shift,
     sample_shifted_filtered,
@@ -68,6 +69,8 @@ __all__ = ["DEFAULT_METHOD", "METHODS", "TrackResult", "Tracker", "track"]
 METHODS = ("ic", "contour", "ssd", "hb")
 #: The method :class:`Tracker` uses unless told otherwise: the best measured combination.
 DEFAULT_METHOD = "ic"
+#: Step (px) below which each smoothed level of the "ic" first stage stops (widest first).
+STAGE1_TOLERANCE = (0.1, 0.05, 0.02)
 
 
 @dataclass(frozen=True)
@@ -306,8 +309,10 @@ class Tracker:
         self.gain, self.offset = 1.0, 0.0
         self.lost = False
         self._scores: list[float] = []
+        self._score_median = (0, float("nan"))
         self._last_prediction_error = np.inf
         self.n_lost = 0
+        self._small_mask = None
         self._prepare_template()
         self._contour_offset = (0, 0)
         if self.method == "contour":
@@ -350,7 +355,18 @@ class Tracker:
         self._t_values = self.template[ys, xs].astype(np.float64)
         if self.method == "ic":
             rho = self.noise.rho if self.whiten else 0.0
-            tw = whiten_lines(self.template, rho)
+            # Only the band's neighbourhood is filtered (the widest kernel's reach around it):
+            # at the band the values are those of the whole template's filtering, 4x cheaper.
+            reach = int(np.ceil(4.0 * max(4.0 * self.coarse_sigma, self.coarse_sigma + 1.5,
+                                          self.jacobian_sigma_first, self.normal_sigma, 1.0))) + 3
+            th, tw_ = self.template.shape
+            bx0, by0, bx1, by1 = self._bbox
+            sx0, sy0 = max(bx0 - reach, 0), max(by0 - reach, 0)
+            sx1, sy1 = min(bx1 + reach, tw_), min(by1 + reach, th)
+            template = np.ascontiguousarray(self.template[sy0:sy1, sx0:sx1])
+            # Whitened whole, then cut: the same first column.
+            tw = np.ascontiguousarray(whiten_lines(self.template, rho)[sy0:sy1, sx0:sx1])
+            yb, xb = ys - sy0, xs - sx0
             # Gradients by eq. 8's 5-point mask of the lightly smoothed template: a noisy Jacobian
             # inflates the variance along the weakly constrained direction (along the shaft, only
             # the apex tells x); the curvature then comes from the image (see _fit).
@@ -368,18 +384,18 @@ class Tracker:
                 # Keep only the gradient's component along the edge normal, whose direction
                 # comes from the heavily smoothed template: noise across the normal would leak
                 # into x along a near-horizontal shaft, whose only x information is its apex.
-                nx, ny = five_point_gradients(cv2.GaussianBlur(self.template, (0, 0), self.normal_sigma))
+                nx, ny = five_point_gradients(cv2.GaussianBlur(template, (0, 0), self.normal_sigma))
                 norm = np.hypot(nx, ny) + 1e-12
                 nx, ny = nx / norm, ny / norm
                 along = gx * nx + gy * ny
                 gx, gy = along * nx, along * ny
-            self._tw_values = tw[ys, xs].astype(np.float64)
-            self._gx, self._gy = gx[ys, xs].astype(np.float64), gy[ys, xs].astype(np.float64)
+            self._tw_values = tw[yb, xb].astype(np.float64)
+            self._gx, self._gy = gx[yb, xb].astype(np.float64), gy[yb, xb].astype(np.float64)
             # The same, smoothed: the first, robust stage of every frame's registration.
             tws = cv2.GaussianBlur(tw, (0, 0), self.coarse_sigma) if self.coarse_sigma > 0 else tw
             sgx, sgy = five_point_gradients(tws)
-            self._tws_values = tws[ys, xs].astype(np.float64)
-            self._sgx, self._sgy = sgx[ys, xs].astype(np.float64), sgy[ys, xs].astype(np.float64)
+            self._tws_values = tws[yb, xb].astype(np.float64)
+            self._sgx, self._sgy = sgx[yb, xb].astype(np.float64), sgy[yb, xb].astype(np.float64)
             self._inside = self.contour.region[ys, xs]
             # Noise variance of the (whitened, averaged) template at the band pixels, and the
             # factor by which the first stage's smoothing reduces it.
@@ -388,17 +404,20 @@ class Tracker:
             self._stage1_sigmas = (4.0 * self.coarse_sigma, 2.0 * self.coarse_sigma, self.coarse_sigma)
             stage1 = {}
             for k, sigma in enumerate(self._stage1_sigmas if self.coarse_sigma > 0 else ()):
-                ts = cv2.GaussianBlur(tw, (0, 0), sigma)
-                s_gx, s_gy = five_point_gradients(ts)
-                stage1[f"_s{k}_values"] = ts[ys, xs].astype(np.float64)
-                stage1[f"_s{k}_gx"], stage1[f"_s{k}_gy"] = s_gx[ys, xs].astype(np.float64), s_gy[ys, xs].astype(np.float64)
+                if sigma == self.coarse_sigma:
+                    ts, s_gx, s_gy = tws, sgx, sgy  # the finest level is the smoothed template above
+                else:
+                    ts = cv2.GaussianBlur(tw, (0, 0), sigma)
+                    s_gx, s_gy = five_point_gradients(ts)
+                stage1[f"_s{k}_values"] = ts[yb, xb].astype(np.float64)
+                stage1[f"_s{k}_gx"], stage1[f"_s{k}_gy"] = s_gx[yb, xb].astype(np.float64), s_gy[yb, xb].astype(np.float64)
             # The instrument for the gain: the template smoothed (its own noise mostly averaged out).
             iv = self.photometry == "instrument"
-            self._instrument = cv2.GaussianBlur(tw, (0, 0), 1.5)[ys, xs].astype(np.float64) if iv else None
-            self._instrument_s = cv2.GaussianBlur(tws, (0, 0), 1.5)[ys, xs].astype(np.float64) if iv else None
-            self._gx, self._gy = gx[ys, xs].astype(np.float64), gy[ys, xs].astype(np.float64)
+            self._instrument = cv2.GaussianBlur(tw, (0, 0), 1.5)[yb, xb].astype(np.float64) if iv else None
+            self._instrument_s = cv2.GaussianBlur(tws, (0, 0), 1.5)[yb, xb].astype(np.float64) if iv else None
+            self._gx, self._gy = gx[yb, xb].astype(np.float64), gy[yb, xb].astype(np.float64)
             if self.noise_weights:
-                level = cv2.GaussianBlur(self.template, (0, 0), 1.0)[ys, xs]
+                level = cv2.GaussianBlur(template, (0, 0), 1.0)[yb, xb]
                 var = self.noise.variance(level)
                 self._base_weights = var.min() / var
             else:
@@ -408,17 +427,21 @@ class Tracker:
                 "_instrument_s", "_instrument", "_t_values")}
             self._arrays.update(stage1)
             self._apply_weights()
+            self._setups = self._gn_setups(self._arrays)
             f = self.coarse_factor
             h, w = self.template.shape
             hc, wc = h - h % f, w - w % f
             self._small = cv2.resize(self.template[:hc, :wc], (wc // f, hc // f), interpolation=cv2.INTER_AREA)
             # The coarse search sees the object and its immediate surroundings only, so that static
             # background in the ROI does not pull the match back when the probe moves.
-            k = 8 * f + 1
-            region = cv2.dilate((self.contour.region | self.band).astype(np.uint8),
-                                cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k)))
-            mask = cv2.resize(region[:hc, :wc].astype(np.float32), (wc // f, hc // f),
-                              interpolation=cv2.INTER_AREA) > 0.5
+            # (The contour and the band are those of frame 0: the mask is made once.)
+            if self._small_mask is None:
+                k = 8 * f + 1
+                region = cv2.dilate((self.contour.region | self.band).astype(np.uint8),
+                                    cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k)))
+                self._small_mask = cv2.resize(region[:hc, :wc].astype(np.float32), (wc // f, hc // f),
+                                              interpolation=cv2.INTER_AREA) > 0.5
+            mask = self._small_mask
             if mask.sum() >= 4 and np.ptp(self._small[mask]) > 0:
                 # Outside the object's neighbourhood the template is flat (its mean there), so
                 # it adds nothing to the correlation's numerator: a mask at the price of none.
@@ -488,6 +511,10 @@ class Tracker:
     def _band_inside(self, shift, shape, margin=2, fraction=1.0) -> bool:
         """Whether at least ``fraction`` of the band lies ``margin`` px inside the image at ``shift``."""
         x0, y0 = self.roi[:2]
+        bx0, by0, bx1, by1 = self._bbox
+        if (bx0 + x0 + shift[0] >= margin and by0 + y0 + shift[1] >= margin
+                and bx1 - 1 + x0 + shift[0] <= shape[1] - 1 - margin and by1 - 1 + y0 + shift[1] <= shape[0] - 1 - margin):
+            return True  # the band's bounding box is inside
         px = self._points[:, 0] + x0 + shift[0]
         py = self._points[:, 1] + y0 + shift[1]
         inside = (px >= margin) & (py >= margin) & (px <= shape[1] - 1 - margin) & (py <= shape[0] - 1 - margin)
@@ -511,14 +538,29 @@ class Tracker:
         # Block-averaging by f maps both images alike: an offset k in the small image is f·k.
         return np.array([wx + f * px - self.roi[0], wy + f * py - self.roi[1]])
 
-    def _fit(self, arr, shift0, gain0, offset0, margin=12, at=(0, 0), robust_start=True):
-        """Gauss–Newton on the contour band of the whitened crop around ``shift0``.
+    def _gn_setups(self, arrays):
+        """The per-template constants of every Gauss–Newton stage (:func:`gauss_newton_setup`)."""
+        common = {"weights": arrays["_weights"], "photometric": self.photometric}
+        try:
+            setups = {"fine": gauss_newton_setup(arrays["_tw_values"], arrays["_gx"], arrays["_gy"], **common,
+                                                 regions=arrays["_inside"] if self.photometry == "regions" else None)}
+            for k in range(len(self._stage1_sigmas) if self.coarse_sigma > 0 else 0):
+                setups[k] = gauss_newton_setup(arrays[f"_s{k}_values"], arrays[f"_s{k}_gx"], arrays[f"_s{k}_gy"],
+                                               **common, regions=arrays["_inside"])
+        except ValueError:
+            return {}  # a template without two levels: every fit says why
+        return setups
 
-        ``arr`` is the frame, or a part of it whose pixel [0, 0] is the frame's pixel ``at``.
+    def _band_crop(self, arr, shift, margin, at):
+        """The whitened crop of ``arr`` around the band at ``shift`` (``margin`` px each side).
+
+        Returns the float32 crop, its whitened version, the band points in crop coordinates at
+        zero shift, the per-point arrays (band pixels that have left the image dropped), the
+        crop's integer shift and the Gauss–Newton set-ups for those points.
         """
         x0, y0 = self.roi[0] - at[0], self.roi[1] - at[1]
         bx0, by0, bx1, by1 = self._bbox
-        sx, sy = round(shift0[0]), round(shift0[1])
+        sx, sy = round(shift[0]), round(shift[1])
         cx0, cy0 = max(x0 + bx0 + sx - margin, 0), max(y0 + by0 + sy - margin, 0)
         cx1 = min(x0 + bx1 + sx + margin, arr.shape[1])
         cy1 = min(y0 + by1 + sy + margin, arr.shape[0])
@@ -528,44 +570,100 @@ class Tracker:
         rho = self.noise.rho if self.whiten else 0.0
         cw = whiten_lines(crop, rho)
         pts = self._points + (x0 - cx0, y0 - cy0)
-        arrays = self._arrays
-        # Band pixels that have left the image (the object near its border) drop out.
-        px0, py0 = pts[:, 0] + shift0[0], pts[:, 1] + shift0[1]
-        valid = (px0 >= 3) & (py0 >= 3) & (px0 <= cw.shape[1] - 4) & (py0 <= cw.shape[0] - 4)
-        if not valid.all():
-            if valid.mean() < 0.5 or valid.sum() < 10:
-                raise ValueError("the target has left the image")
-            pts = pts[valid]
-            arrays = {k: (v[valid] if isinstance(v, np.ndarray) else v) for k, v in arrays.items()}
+        arrays, setups = self._arrays, self._setups
+        # Band pixels that have left the image (the object near its border) drop out; the band's
+        # bounding box tells whether any has.
+        lo_x, lo_y = bx0 + x0 - cx0 + shift[0], by0 + y0 - cy0 + shift[1]
+        hi_x, hi_y = bx1 - 1 + x0 - cx0 + shift[0], by1 - 1 + y0 - cy0 + shift[1]
+        if not (lo_x >= 3 and lo_y >= 3 and hi_x <= cw.shape[1] - 4 and hi_y <= cw.shape[0] - 4):
+            px0, py0 = pts[:, 0] + shift[0], pts[:, 1] + shift[1]
+            valid = (px0 >= 3) & (py0 >= 3) & (px0 <= cw.shape[1] - 4) & (py0 <= cw.shape[0] - 4)
+            if not valid.all():
+                if valid.mean() < 0.5 or valid.sum() < 10:
+                    raise ValueError("the target has left the image")
+                pts = pts[valid]
+                arrays = {k: (v[valid] if isinstance(v, np.ndarray) else v) for k, v in arrays.items()}
+                setups = {}
+        return crop, cw, pts, arrays, np.array([sx, sy], float), setups
+
+    def _fit(self, arr, shift0, gain0, offset0, margin=12, at=(0, 0), robust_start=True, max_move=None,
+             give_up=False):
+        """Gauss–Newton on the contour band of the whitened crop around ``shift0``.
+
+        ``arr`` is the frame, or a part of it whose pixel [0, 0] is the frame's pixel ``at``.
+        A fit whose translation would take the band more than ``margin − 3`` px from the crop
+        it was started in (beyond, the band would sample the crop's replicated border) stops
+        there: a smoothed level then goes on in a crop centred where it got to (twice at most),
+        or, with ``give_up`` (a start that is only a prediction), the widest level gives up at
+        once and the fit returns unconverged, for the coarse search. The full-resolution stage
+        stops unconverged there or after ``max_move`` px.
+        """
+        reach = margin - 3
+        crop, cw, pts, arrays, centre, setups = self._band_crop(arr, shift0, margin, at)
         two_level = self.photometry == "regions"
         common = {"weights": arrays["_weights"], "huber": self.huber, "photometric": self.photometric,
                   "regions": arrays["_inside"] if two_level else None}
         iv = self.photometry == "instrument"
+        # An averaged template (lightly smoothed Jacobian): the iterations shrink geometrically and
+        # may stop one early (early_stop). A young, noisy one takes its curvature from the image,
+        # and its iterations, which do not shrink so regularly, run to the tolerance.
+        mature = self._sigma_j <= 1.0
         if self.coarse_sigma > 0 and robust_start:
             # Stage 1, coarse to fine, both images smoothed alike (σ = 4, 2, 1 × coarse_sigma): a
             # wide basin and a smooth cost, so a start several px off (a bad prediction, a coarse
             # peak slid along a straight edge) or a noisy one-frame template still converges.
-            moved_total = np.zeros(2)
-            for k, sigma in enumerate(self._stage1_sigmas):
+            # With an averaged template the full-resolution stage takes over from σ = 2 × coarse_sigma
+            # (its basin reaches that far); a young, noisy one needs the last smoothed level too.
+            levels = list(enumerate(self._stage1_sigmas[:2] if mature else self._stage1_sigmas))
+            recrops = 2
+            while levels:
+                k, sigma = levels[0]
                 smooth = cv2.GaussianBlur(cw, (0, 0), sigma)
                 values, sgx, sgy = (arrays[f"_s{k}_values"], arrays[f"_s{k}_gx"], arrays[f"_s{k}_gy"])
+                room = reach - float(np.max(np.abs(np.asarray(shift0, float) - centre)))
+                # The smoothed levels only have to bring the next one into its basin.
                 first = gauss_newton_translation(smooth, pts, values, sgx, sgy, shift0, gain0=gain0, offset0=offset0,
-                                                 max_iterations=self.max_iterations, tolerance=0.02,
+                                                 max_iterations=self.max_iterations,
+                                                 tolerance=STAGE1_TOLERANCE[min(k, len(STAGE1_TOLERANCE) - 1)],
                                                  weights=arrays["_weights"], huber=self.huber,
-                                                 photometric=self.photometric, regions=arrays["_inside"])
+                                                 photometric=self.photometric, regions=arrays["_inside"],
+                                                 max_move=room, setup=setups.get(k), early_stop=mature)
                 if first.converged and abs(first.gain) > 0.05:
-                    moved_total += first.shift - shift0
                     shift0, gain0, offset0 = first.shift, first.gain, first.offset
+                elif np.max(np.abs(first.shift - shift0)) > room:
+                    if give_up and k == 0:
+                        # The widest basin leaves the crop: the prediction is farther off than
+                        # the crop reaches, a job for the coarse search.
+                        return first, 0.0
+                    if recrops and np.all(np.isfinite(first.shift)):
+                        recrops -= 1
+                        try:
+                            crop, cw, pts, arrays, centre, setups = self._band_crop(arr, first.shift, margin, at)
+                        except ValueError:
+                            recrops = 0
+                        else:
+                            shift0 = first.shift
+                            continue  # the same level again, in a crop centred where it got to
+                levels.pop(0)
+            if np.any(np.round(shift0) != centre):
+                # Stage 2 in a crop centred on its start (the same pixels, whitened alike).
+                crop, cw, pts, arrays, centre, setups = self._band_crop(arr, shift0, margin, at)
+            # (the crop, hence the band pixels still inside it, may have changed in stage 1)
+            common = {"weights": arrays["_weights"], "huber": self.huber, "photometric": self.photometric,
+                      "regions": arrays["_inside"] if two_level else None}
         # Stage 2, full resolution: the efficient estimate. A strongly smoothed Jacobian (young
         # template) takes its curvature from the image; a light one is close enough to exact.
-        curvature = five_point_gradients(cw) if self._sigma_j > 1.0 else None
+        curvature = None if mature else five_point_gradients(cw)
+        limit = reach if max_move is None else min(reach, max_move)
         fit = gauss_newton_translation(cw, pts, arrays["_tw_values"], arrays["_gx"], arrays["_gy"], shift0,
                                        gain0=gain0, offset0=offset0, max_iterations=self.max_iterations,
                                        curvature=curvature,
                                        template_variance=None if (two_level or iv) else arrays["_t_var"],
-                                       instrument=arrays["_instrument"] if iv else None, **common)
+                                       instrument=arrays["_instrument"] if iv else None,
+                                       max_move=limit, setup=setups.get("fine"),
+                                       early_stop=mature, **common)
         moved = float(np.max(np.abs(fit.shift - np.asarray(shift0, float)))) if np.all(np.isfinite(fit.shift)) else np.inf
-        if moved > margin - 3:
+        if moved > limit:
             fit.converged = False
         plain = cv2.remap(crop, (pts[:, 0] + fit.shift[0]).astype(np.float32).reshape(1, -1),
                           (pts[:, 1] + fit.shift[1]).astype(np.float32).reshape(1, -1), cv2.INTER_CUBIC,
@@ -575,20 +673,29 @@ class Tracker:
 
     def _threshold(self) -> float:
         if self._scores:
-            return max(self.min_score, self.min_relative_score * float(np.median(self._scores)))
+            return max(self.min_score, self.min_relative_score * self._median_score())
         return self.min_score
+
+    def _median_score(self) -> float:
+        """Median of the first frames' scores (cached: the list only grows, to 10)."""
+        if self._score_median[0] != len(self._scores):
+            self._score_median = (len(self._scores), float(np.median(self._scores)))
+        return self._score_median[1]
 
     def _update_ic(self, arr) -> TrackResult:
         predicted = self.shift + self.velocity
         fit, score, good = None, 0.0, False
-        typical = 0.9 * float(np.median(self._scores)) if self._scores else 1.0
+        typical = 0.9 * self._median_score() if self._scores else 1.0
         if not self.lost:
             # The constant-velocity prediction first: while tracking it is within a fraction of
             # a pixel (then the smoothed first stage is skipped) or a few px (a change of speed).
             steady = self._last_prediction_error < 1.0
-            fit, score = self._fit(arr, predicted, self.gain, self.offset, robust_start=not steady)
+            # A steady fit that has to move more than a few px is a change of speed: the
+            # smoothed stage is the tool then, not 20 crawling full-resolution iterations.
+            fit, score = self._fit(arr, predicted, self.gain, self.offset, robust_start=not steady,
+                                   max_move=3.0 if steady else None, give_up=True)
             if steady and not fit.converged:
-                fit, score = self._fit(arr, predicted, self.gain, self.offset)
+                fit, score = self._fit(arr, predicted, self.gain, self.offset, give_up=True)
             good = fit.converged and score >= max(self._threshold(), typical)
         if not good:
             # A jump, a poor match or a lost target: the coarse search over the window (the
