@@ -415,7 +415,6 @@ class Tracker:
             iv = self.photometry == "instrument"
             self._instrument = cv2.GaussianBlur(tw, (0, 0), 1.5)[yb, xb].astype(np.float64) if iv else None
             self._instrument_s = cv2.GaussianBlur(tws, (0, 0), 1.5)[yb, xb].astype(np.float64) if iv else None
-            self._gx, self._gy = gx[yb, xb].astype(np.float64), gy[yb, xb].astype(np.float64)
             if self.noise_weights:
                 level = cv2.GaussianBlur(template, (0, 0), 1.0)[yb, xb]
                 var = self.noise.variance(level)
@@ -722,10 +721,16 @@ class Tracker:
         self.gain, self.offset = fit.gain, fit.offset
         if len(self._scores) < 10:
             self._scores.append(score)
-        if self._stack is not None and fit.inliers > 0.8 and score >= 0.8 * np.median(self._scores):
-            self._average_into_template(arr, fit)
         self._last_prediction_error = float(np.hypot(*(fit.shift - predicted)))
-        return self._accept(fit.shift, score)
+        # The answer is the shift against the template that measured it, with that template's
+        # origin; a template refreshed from this frame brings its own origin, and the state
+        # moves into its coordinates (the position, shift − origin, stays).
+        result = self._accept(fit.shift, score)
+        if self._stack is not None and fit.inliers > 0.8 and score >= 0.8 * np.median(self._scores):
+            origin = self.origin.copy()
+            self._average_into_template(arr, fit)
+            self.shift = self.shift + (self.origin - origin)
+        return result
 
     def _reacquire(self, arr, predicted, sigma=1.5, min_ncc=0.6, min_margin=0.05):
         """Fallback when Gauss–Newton fails: where in the search window the object looks most alike.
@@ -882,7 +887,9 @@ class Tracker:
         is compared with its mean over the frames more than 3 px away (Welch's t); where the
         difference exceeds ``cut`` standard errors, the pixel (and its neighbours: a feature is a
         few px across) is background: kept in the template, it would pull the object back to
-        where the template was taken. Without frames in both groups (the object stood still)
+        where the template was taken. Only background pixels at least 1 px from the contour can be
+        flagged: the object and its contour, above all its apex (without which the fit slides
+        along the shaft), always stay. Without frames in both groups (the object stood still)
         nothing is flagged.
         """
         moved = np.hypot(*(np.asarray(shifts, float) - np.asarray(shifts[0], float)).T)
@@ -894,10 +901,12 @@ class Tracker:
         a, b = values[near], values[far]
         se = np.sqrt(a.var(axis=0, ddof=1) / len(a) + b.var(axis=0, ddof=1) / len(b))
         t = np.abs(a.mean(axis=0) - b.mean(axis=0)) / np.maximum(se, 1e-9)
+        distance = cv2.distanceTransform((~self.contour.mask).astype(np.uint8), cv2.DIST_L2, 3)
+        eligible = ~self.contour.region & (distance >= 1.0)
         flagged = np.zeros(self.band.shape, np.uint8)
         flagged[ys[t > cut], xs[t > cut]] = 1
         flagged = cv2.dilate(flagged, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5)))
-        keep = flagged[ys, xs] == 0
+        keep = (flagged[ys, xs] == 0) | ~eligible[ys, xs]
         if keep.mean() < 0.5:
             return None  # more than half inconsistent: no object model to trust, keep all
         return keep.astype(np.float64)
