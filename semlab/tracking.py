@@ -578,11 +578,15 @@ class Tracker:
         ``arr`` is the frame, or a part of it whose pixel [0, 0] is the frame's pixel ``at``.
         A fit whose translation would take the band more than ``margin − 3`` px from the crop
         it was started in (beyond, the band would sample the crop's replicated border) stops
-        there: a smoothed level then goes on in a crop centred where it got to (twice at most),
-        or, with ``give_up`` (a start that is only a prediction), the widest level gives up at
-        once and the fit returns unconverged, for the coarse search. The full-resolution stage
-        stops unconverged there or after ``max_move`` px.
+        there, unconverged: the next smoothed level starts again from the last good position
+        or, with ``give_up`` (a start that is only a prediction), the fit returns at once when
+        the widest level does so, for the coarse search. The full-resolution stage also stops
+        after ``max_move`` px.
         """
+        if robust_start and not give_up:
+            # A start from the coarse search can be off by more than a quarter-resolution pixel
+            # (its peak slides along a straight edge): twice the reach.
+            margin = 2 * margin
         reach = margin - 3
         crop, cw, pts, arrays, centre, setups = self._band_crop(arr, shift0, margin, at)
         two_level = self.photometry == "regions"
@@ -599,10 +603,7 @@ class Tracker:
             # peak slid along a straight edge) or a noisy one-frame template still converges.
             # With an averaged template the full-resolution stage takes over from σ = 2 × coarse_sigma
             # (its basin reaches that far); a young, noisy one needs the last smoothed level too.
-            levels = list(enumerate(self._stage1_sigmas[:2] if mature else self._stage1_sigmas))
-            recrops = 2
-            while levels:
-                k, sigma = levels[0]
+            for k, sigma in enumerate(self._stage1_sigmas[:2] if mature else self._stage1_sigmas):
                 smooth = cv2.GaussianBlur(cw, (0, 0), sigma)
                 values, sgx, sgy = (arrays[f"_s{k}_values"], arrays[f"_s{k}_gx"], arrays[f"_s{k}_gy"])
                 room = reach - float(np.max(np.abs(np.asarray(shift0, float) - centre)))
@@ -615,21 +616,10 @@ class Tracker:
                                                  max_move=room, setup=setups.get(k), early_stop=mature)
                 if first.converged and abs(first.gain) > 0.05:
                     shift0, gain0, offset0 = first.shift, first.gain, first.offset
-                elif np.max(np.abs(first.shift - shift0)) > room:
-                    if give_up and k == 0:
-                        # The widest basin leaves the crop: the prediction is farther off than
-                        # the crop reaches, a job for the coarse search.
-                        return first, 0.0
-                    if recrops and np.all(np.isfinite(first.shift)):
-                        recrops -= 1
-                        try:
-                            crop, cw, pts, arrays, centre, setups = self._band_crop(arr, first.shift, margin, at)
-                        except ValueError:
-                            recrops = 0
-                        else:
-                            shift0 = first.shift
-                            continue  # the same level again, in a crop centred where it got to
-                levels.pop(0)
+                elif give_up and k == 0 and np.max(np.abs(first.shift - shift0)) > room:
+                    # The widest basin leaves the crop: the prediction is farther off than the
+                    # crop reaches, a job for the coarse search.
+                    return first, 0.0
             if np.any(np.round(shift0) != centre):
                 # Stage 2 in a crop centred on its start (the same pixels, whitened alike).
                 crop, cw, pts, arrays, centre, setups = self._band_crop(arr, shift0, margin, at)
