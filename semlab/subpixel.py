@@ -337,8 +337,24 @@ def gauss_newton_setup(values, gx, gy, *, weights=None, regions=None, photometri
     """What :func:`gauss_newton_translation` derives from the template alone, computed once.
 
     A tracker registers every frame against the same template pixels: passing this as
-    ``setup=`` saves rebuilding the same products at every call. The arguments mean the same as
-    in :func:`gauss_newton_translation` and must be the same arrays.
+    ``setup=`` saves rebuilding the same products at every call.
+
+    Parameters
+    ----------
+    values, gx, gy, weights, regions, photometric
+        As in :func:`gauss_newton_translation`, and the same arrays as given to it.
+
+    Returns
+    -------
+    dict
+        The template's values, gradients and weights as float64, and the products that the
+        normal equations of the 2×2 (translation) and region-level steps are made of.
+
+    Raises
+    ------
+    ValueError
+        ``regions`` (with ``photometric``) marks only object or only background pixels, or the
+        template has no contrast between them.
     """
     t = np.asarray(values, np.float64)
     tx, ty = np.asarray(gx, np.float64), np.asarray(gy, np.float64)

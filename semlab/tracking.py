@@ -590,13 +590,16 @@ class Tracker:
         """Gauss–Newton on the contour band of the whitened crop around ``shift0``.
 
         ``arr`` is the frame, or a part of it whose pixel [0, 0] is the frame's pixel ``at``.
-        A fit whose translation would take the band more than ``margin − 3`` px from the crop
-        it was started in (beyond, the band would sample the crop's replicated border) stops
-        there: a smoothed level then goes on in a crop centred where it got to (twice at most),
-        or, with ``give_up`` (a start that is only a prediction), the widest level gives up at
-        once and the fit returns unconverged, for the coarse search. The full-resolution stage
-        stops unconverged there or after ``max_move`` px.
+        ``give_up``: the start is only a prediction, and the fast path is taken: a smoothed level
+        stops, unconverged, when the band would leave the crop (``margin − 3`` px: beyond, it
+        would sample the crop's replicated border), the whole fit as soon as the widest level
+        does so (the coarse search's job), the smoothed levels stop early and the last one is
+        left out once the template is averaged, and the full-resolution stage runs in a crop
+        centred on its start. Without it (a start from the coarse search, the last resort)
+        the smoothed stage runs in full, as it always did. The full-resolution stage stops,
+        unconverged, after ``margin − 3`` or ``max_move`` px.
         """
+        careful = robust_start and not give_up
         reach = margin - 3
         crop, cw, pts, arrays, centre, setups = self._band_crop(arr, shift0, margin, at)
         two_level = self.photometry == "regions"
@@ -613,38 +616,25 @@ class Tracker:
             # peak slid along a straight edge) or a noisy one-frame template still converges.
             # With an averaged template the full-resolution stage takes over from σ = 2 × coarse_sigma
             # (its basin reaches that far); a young, noisy one needs the last smoothed level too.
-            levels = list(enumerate(self._stage1_sigmas[:2] if mature else self._stage1_sigmas))
-            recrops = 2
-            while levels:
-                k, sigma = levels[0]
+            levels = self._stage1_sigmas[:2] if (mature and not careful) else self._stage1_sigmas
+            for k, sigma in enumerate(levels):
                 smooth = cv2.GaussianBlur(cw, (0, 0), sigma)
                 values, sgx, sgy = (arrays[f"_s{k}_values"], arrays[f"_s{k}_gx"], arrays[f"_s{k}_gy"])
-                room = reach - float(np.max(np.abs(np.asarray(shift0, float) - centre)))
+                room = np.inf if careful else reach - float(np.max(np.abs(np.asarray(shift0, float) - centre)))
                 # The smoothed levels only have to bring the next one into its basin.
+                tolerance = 0.02 if careful else STAGE1_TOLERANCE[min(k, len(STAGE1_TOLERANCE) - 1)]
                 first = gauss_newton_translation(smooth, pts, values, sgx, sgy, shift0, gain0=gain0, offset0=offset0,
-                                                 max_iterations=self.max_iterations,
-                                                 tolerance=STAGE1_TOLERANCE[min(k, len(STAGE1_TOLERANCE) - 1)],
+                                                 max_iterations=self.max_iterations, tolerance=tolerance,
                                                  weights=arrays["_weights"], huber=self.huber,
                                                  photometric=self.photometric, regions=arrays["_inside"],
-                                                 max_move=room, setup=setups.get(k), early_stop=mature)
+                                                 max_move=room, setup=setups.get(k), early_stop=mature and not careful)
                 if first.converged and abs(first.gain) > 0.05:
                     shift0, gain0, offset0 = first.shift, first.gain, first.offset
-                elif np.max(np.abs(first.shift - shift0)) > room:
-                    if give_up and k == 0:
-                        # The widest basin leaves the crop: the prediction is farther off than
-                        # the crop reaches, a job for the coarse search.
-                        return first, 0.0
-                    if recrops and np.all(np.isfinite(first.shift)):
-                        recrops -= 1
-                        try:
-                            crop, cw, pts, arrays, centre, setups = self._band_crop(arr, first.shift, margin, at)
-                        except ValueError:
-                            recrops = 0
-                        else:
-                            shift0 = first.shift
-                            continue  # the same level again, in a crop centred where it got to
-                levels.pop(0)
-            if np.any(np.round(shift0) != centre):
+                elif give_up and k == 0 and np.max(np.abs(first.shift - shift0)) > room:
+                    # The widest basin leaves the crop: the prediction is farther off than the
+                    # crop reaches, a job for the coarse search.
+                    return first, 0.0
+            if not careful and np.any(np.round(shift0) != centre):
                 # Stage 2 in a crop centred on its start (the same pixels, whitened alike).
                 crop, cw, pts, arrays, centre, setups = self._band_crop(arr, shift0, margin, at)
             # (the crop, hence the band pixels still inside it, may have changed in stage 1)
@@ -660,7 +650,7 @@ class Tracker:
                                        template_variance=None if (two_level or iv) else arrays["_t_var"],
                                        instrument=arrays["_instrument"] if iv else None,
                                        max_move=limit, setup=setups.get("fine"),
-                                       early_stop=mature, **common)
+                                       early_stop=mature and not careful, **common)
         moved = float(np.max(np.abs(fit.shift - np.asarray(shift0, float)))) if np.all(np.isfinite(fit.shift)) else np.inf
         if moved > limit:
             fit.converged = False
