@@ -243,9 +243,11 @@ def run_step(b: Bench, model, path, step, *, feedforward, **params):
     resp = step_response(b.mic, b.axis, roi, step, model=model, feedforward=feedforward,
                          n_frames=60, tracker=b.tracker(jump_px=abs(step)), **params)
     b.sync_after(resp, model)
+    f0 += resp.attrs.get("warmup_frames", 0)  # the tracker's warm-up on the still probe precedes row 0
     truth = true_displacement(b.rig, resp.attrs["direction"], resp["frame"].to_numpy() + f0)
     resp["true_displacement"] = truth - truth[0]
     m = step_metrics(resp)
+    m["warmup_noise_px"] = resp.attrs.get("warmup_noise_px", np.nan)
     sgn = np.sign(step)
     true_final = float(np.mean(resp["true_displacement"].iloc[-30:]))
     m["true_final_error_px"] = true_final - step
@@ -379,6 +381,7 @@ def section_ab(b: Bench, model, creep, n=5, frames=25):
                 ends.append(len(servo.rows) - 1)
     df = servo.to_frame()
     b.sync_after(df, model)
+    f0 += df.attrs.get("warmup_frames", 0)
     truth = true_displacement(b.rig, df.attrs["direction"], df["frame"].to_numpy() + f0)
     df["true_displacement"] = truth - truth[0]
     at_b = df.iloc[ends]
