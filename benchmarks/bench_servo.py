@@ -284,7 +284,7 @@ def section_steps(b: Bench, model, creep, n_rep, seed=2):
     starts = starting_paths(model, n_rep, rng)
     tune_starts = starting_paths(model, 3 if FAST else 4, np.random.default_rng(seed + 100))
     ki_best, tuning = tune_pid_without_ff(b, model, tune_starts)
-    ff_params = {"creep": creep}  # and the servo's defaults: PID(ki=0.8), ki_fine=0.25, ff_margin=1.5 %
+    ff_params = {"creep": creep}  # and the servo's defaults: PID(ki=0.8), ki_fine=0.25, ff_margin=2.5 %
     rows = []
     for i, (path, step) in enumerate(starts):
         _, m_ff = run_step(b, model, path, step, feedforward=True, **ff_params)
@@ -347,7 +347,7 @@ def section_variants(b: Bench, models, creep, n_rep, seed=2):
         "polynomial + creep comp. (default)": ("polynomial", {"creep": creep}),
         "polynomial, no creep comp.": ("polynomial", {}),
         "polynomial, no creep comp., no gain scheduling": ("polynomial", {"ki_fine": None}),
-        "polynomial + creep comp., no 1.5 % margin": ("polynomial", {"creep": creep, "ff_margin": 0.0}),
+        "polynomial + creep comp., no 2.5 % margin": ("polynomial", {"creep": creep, "ff_margin": 0.0}),
         "PI + creep comp.": ("pi", {"creep": creep}),
     }
     rows = []
