@@ -349,6 +349,8 @@ def section_variants(b: Bench, models, creep, n_rep, seed=2):
         "polynomial, no creep comp., no gain scheduling": ("polynomial", {"ki_fine": None}),
         "polynomial + creep comp., no 2.5 % margin": ("polynomial", {"creep": creep, "ff_margin": 0.0}),
         "PI + creep comp.": ("pi", {"creep": creep}),
+        # the tracker matures its 20-frame template on the still probe first (2.2 s before the command)
+        "polynomial + creep comp., 28-frame tracker warm-up": ("polynomial", {"creep": creep, "warmup_frames": 28}),
     }
     rows = []
     for name, (kind, params) in variants.items():
