@@ -271,11 +271,12 @@ class VisualServo:
     ff_margin : float
         The feed-forward aims short of the target by this fraction of the move (default 2.5 %): the
         probe then approaches from one side and a model error cannot turn into an overshoot; the PID
-        starts from that offset and closes the gap. On the simulated rig the feed-forward of a 100-px
-        step fell short by 0-4.6 px (polynomial model plus creep compensation) but overshot by up to
-        2.35 px from one start in 24 (independent starts of ``benchmarks/bench_servo.py``); 2.5 %
-        covers that, and a larger margin only gives the PID more to close while the tracker's template
-        is young.
+        starts from that offset and closes the gap. On the simulated rig the feed-forward's own error
+        on a 100-px step (polynomial model plus creep compensation) ranged from 4.6 px short to 2.35 px
+        long (one start in 24); on 48 steps from starts the bench does not report
+        (``benchmarks/bench_servo.py`` setup), the targets were met 33 times with no margin, 40 with
+        1.5 % and 45 with 2.5 % (3 %: 18 of 24 -- more for the PID to close while the tracker's
+        template is young).
     warmup_frames : int
         Frames the tracker follows the still probe in :meth:`start` before anything moves (no command
         is sent; default 0). A researcher's tracker runs continuously, so a template matured before the
@@ -284,10 +285,11 @@ class VisualServo:
         spare for the start point; response times still run from the step command). The start point
         is then the line fitted to the last ``REFERENCE_FRAMES`` warm-up positions, evaluated at the
         last warm-up frame (less noise than one frame, no lag from creep). Measured on the simulated
-        rig (``benchmarks/bench_servo.py``) it does not pay for 100-px steps: the template then holds
-        the clutter around the start position, which no longer lies around the probe after the step,
-        and the tracker's error at the target grows (worst 1.0-1.3 px vs 0.6-0.8 px with a template
-        averaged at the target); it suits small moves, or a clean background.
+        rig it does not pay for 100-px steps (``benchmarks/bench_servo.py``, section 3b: worst 48
+        frames to +-0.5 px, overshoot 0.89 px, final std 0.27 px, vs 19, 0.51 and 0.14 without): the
+        template then holds the clutter around the start position, which no longer lies around the
+        probe after the step, while a template started at the step is averaged at the target. It
+        suits small moves, or a clean background.
     """
 
     def __init__(self, microscope, axis, model, *, tracker=None, feedforward: bool = True, pid=None,
