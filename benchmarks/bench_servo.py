@@ -364,7 +364,8 @@ def section_variants(b: Bench, models, creep, n_rep, seed=2):
                      "pass": int(((df.response_frames_0p5px <= TARGET["frames_0p5px"])
                                   & (df.overshoot_px <= TARGET["overshoot_px"])
                                   & (df.final_std_px <= TARGET["final_std_px"])).sum())})
-    print(f"\n## 3b. Feed-forward variants on {n_rep} other steps (does creep compensation pay? PI vs polynomial?)")
+    print(f"\n## 3b. Feed-forward variants from the starting points of reps 0-{n_rep - 1} above, with fresh noise "
+          "(does creep compensation pay? PI vs polynomial?)")
     print(pd.DataFrame(rows).set_index("feed-forward").round(3).to_string())
 
 
