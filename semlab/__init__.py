@@ -68,7 +68,7 @@ _EXPORTS = {
     "Axis": "semlab.protocols",
 }
 
-__all__ = sorted(_EXPORTS) + ["__version__"]
+__all__ = sorted(_EXPORTS) + ["__version__"]  # noqa: PLE0605 (built from the lazy export table)
 
 
 def __getattr__(name: str):

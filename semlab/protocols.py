@@ -16,7 +16,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-__all__ = ["Microscope", "Axis", "check_command"]
+__all__ = ["Axis", "Microscope", "check_command"]
 
 
 @runtime_checkable
