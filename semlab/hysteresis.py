@@ -1151,7 +1151,8 @@ def characterise_creep(microscope, axis, roi, *, model, step_px: float, n_frames
     from semlab.control import _default_tracker, _read_result, _roi_centre
 
     model.check_axis(axis)
-    tracker = _default_tracker(tracker)
+    # the default tracker's window is widened to hold the step (a 300-px window loses a 100-px jump)
+    tracker = _default_tracker(tracker, jump_px=abs(float(step_px)), roi=roi)
     d = np.asarray(model.direction)
     p0 = np.array(_roi_centre(roi))
     frame = microscope.grab()
