@@ -551,6 +551,19 @@ def _tip_roi(rig, size=200):
     return (rx, ry, size, size), np.array([x, y])
 
 
+def _ramp(rig, axis, model, u_end, n):
+    """Raise the axis to ``u_end`` in ``n`` increments, the model following, one frame each."""
+    for u in np.linspace(0.0, u_end, n + 1)[1:]:
+        axis.apply(u)
+        model.forward(u)
+        rig.microscope.grab()
+
+
+def _true_tip(rig):
+    t = rig.truth
+    return t[t.probe == 0][["x", "y"]].iloc[0].to_numpy(float)
+
+
 def test_rig_characterisation_and_feedforward_step_with_the_tracker(sim_rig):
     rig = sim_rig
     axis = rig.axis(0, "x")
@@ -562,14 +575,10 @@ def test_rig_characterisation_and_feedforward_step_with_the_tracker(sim_rig):
     assert char["ok"].mean() > 0.95
     model = fit_hysteresis(char, kind="pi")
     # a 60 px step from mid-range: the truth must end within half a pixel of it
-    for u in np.linspace(0.0, 15.0, 6)[1:]:
-        axis.apply(u)
-        model.forward(u)
-        rig.microscope.grab()
+    _ramp(rig, axis, model, 15.0, 5)
     roi, p0 = _tip_roi(rig)
     resp = step_response(rig.microscope, axis, roi, 60.0, model=model, n_frames=25)
-    t = rig.truth
-    p1 = t[t.probe == 0][["x", "y"]].iloc[0].to_numpy(float)
+    p1 = _true_tip(rig)
     assert (p1 - p0) @ np.asarray(d) == pytest.approx(60.0, abs=0.5)
     assert resp["ok"].all()
     assert abs(step_metrics(resp, final_frames=10)["final_error_px"]) < 0.3
@@ -586,16 +595,11 @@ def test_creep_is_characterised_through_a_downward_step_with_the_default_tracker
     roi, _ = _tip_roi(rig)
     char = characterise_hysteresis(rig.microscope, axis, roi, u_min=0.0, u_max=40.0, n_steps=16)
     model = fit_hysteresis(char, kind="pi")
-    for u in np.linspace(0.0, 30.0, 7)[1:]:
-        axis.apply(u)
-        model.forward(u)
-        rig.microscope.grab()
+    _ramp(rig, axis, model, 30.0, 6)
     roi, p0 = _tip_roi(rig)
     creep, hold = characterise_creep(rig.microscope, axis, roi, model=model, step_px=-100.0, n_frames=15)
     assert hold["ok"].all()
-    t = rig.truth
-    p1 = t[t.probe == 0][["x", "y"]].iloc[0].to_numpy(float)
-    true_last = float((p1 - p0) @ np.asarray(model.direction))
+    true_last = float((_true_tip(rig) - p0) @ np.asarray(model.direction))
     assert hold["displacement"].iloc[-1] == pytest.approx(true_last, abs=0.5)
     assert true_last == pytest.approx(-100.0, abs=5.0)  # open-loop PI inverse (< 2.5 %) plus creep
     assert creep.gamma >= 0.0
