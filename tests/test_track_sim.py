@@ -138,3 +138,16 @@ def test_roi_from_motion_on_the_rig():
     assert x <= tip[0] <= x + w - 1 and y <= tip[1] <= y + h - 1
     t = Tracker()
     t.init(frames[-1], (x, y, w, h))  # and the ROI holds a usable contour template
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "known limitation (measured): at low dose (10 pA) a thin probe nearly parallel to x (seed 1) carries "
+    "its x information in the apex only; the fit slides 2-6 px along the shaft while the score stays "
+    "normal, so nearly every frame is > 2 px off with ok=True. A matter for semlab/tracking.py."))
+def test_low_dose_thin_probe_is_followed_or_flagged():
+    # Either the tracker follows (error <= 2 px, ~9x this bound) or it says it cannot (ok=False):
+    # no frame may be more than 2 px off while flagged ok.
+    seq = make_sequence("low_dose", n_frames=30, seed=1, motion="still")
+    df = track(seq.frames, seq.roi, method="ic", progress=False)
+    err = tracking_errors(df, seq.truth, seq.roi)
+    assert not (err["ok"] & (err["error"] > 2.0)).any()
