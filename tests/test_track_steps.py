@@ -314,6 +314,32 @@ def test_gauss_newton_recovers_shift_gain_and_offset():
         assert fit.gain == pytest.approx(1.7, rel=0.01)
 
 
+def test_gauss_newton_setup_and_early_stop_change_nothing_that_matters():
+    # The per-template constants computed once (setup=) are what every call would compute: the
+    # same answer to rounding. Early stop ends one extrapolated step early, so within a few
+    # times the tolerance of the full iteration (noisy image: the iterations shrink geometrically).
+    from semlab.subpixel import gauss_newton_setup
+
+    template = wedge(sigma=1.2).astype(np.float32)
+    pts, inside = _band_points(template)
+    gx, gy = five_point_gradients(template)
+    ys, xs = pts[:, 1].astype(int), pts[:, 0].astype(int)
+    rng = np.random.default_rng(3)
+    image = (1.2 * wedge(tip=(100.8, 59.6), sigma=1.2) + 5.0 + 3.0 * rng.standard_normal(template.shape)).astype(np.float32)
+    weights = np.linspace(0.5, 1.0, len(ys))
+    args = (image, pts, template[ys, xs], gx[ys, xs], gy[ys, xs], (0.0, 0.0))
+    for regions in (None, inside):
+        setup = gauss_newton_setup(template[ys, xs], gx[ys, xs], gy[ys, xs], weights=weights, regions=regions)
+        plain = gauss_newton_translation(*args, weights=weights, regions=regions)
+        cached = gauss_newton_translation(*args, weights=weights, regions=regions, setup=setup)
+        early = gauss_newton_translation(*args, weights=weights, regions=regions, setup=setup, early_stop=True)
+        assert plain.converged and cached.converged and early.converged
+        np.testing.assert_allclose(cached.shift, plain.shift, atol=1e-9)
+        assert cached.gain == pytest.approx(plain.gain, rel=1e-9)
+        assert np.hypot(*(early.shift - plain.shift)) < 5 * 2e-3
+        assert early.iterations <= plain.iterations
+
+
 def test_huber_weights_resist_an_occluder():
     template = wedge(sigma=1.2).astype(np.float32)
     pts, _ = _band_points(template)
