@@ -34,6 +34,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from .protocols import as_finite
+
 __all__ = [
     "BRANCHES",
     "CreepModel",
@@ -79,16 +81,6 @@ def axis_identity(axis) -> str:
         if value is not None and not callable(value):
             return str(value)
     return f"{type(axis).__name__}@{id(axis):x}"
-
-
-def _finite(value, what: str) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{what} {value!r} is not a number") from None
-    if not math.isfinite(v):
-        raise ValueError(f"{what} is {v}; a finite number is required")
-    return v
 
 
 def play_operator(u, r: float, z0: float | None = None) -> np.ndarray:
@@ -166,7 +158,7 @@ def characterisation_voltages(u_min: float, u_max: float, n_steps: int = 30, inn
         Columns ``step, segment, u, branch``. Segment 0 is the ascending major branch, 1 the
         descending one, 2... the inner-loop segments.
     """
-    u_min, u_max = _finite(u_min, "u_min"), _finite(u_max, "u_max")
+    u_min, u_max = as_finite(u_min, "u_min"), as_finite(u_max, "u_max")
     if not u_min < u_max:
         raise ValueError(f"u_min={u_min} must be below u_max={u_max}")
     n_steps = int(n_steps)
@@ -246,7 +238,7 @@ class HysteresisModel:
     kind = "base"
 
     def __init__(self, u_range, *, axis="unknown", direction=(1.0, 0.0), meta=None):
-        u0, un = (_finite(v, "model range bound") for v in u_range)
+        u0, un = (as_finite(v, "model range bound") for v in u_range)
         if not u0 < un:
             raise ValueError(f"model voltage range {u_range} is empty")
         self.u_range = (u0, un)
@@ -301,7 +293,7 @@ class HysteresisModel:
         return HysteresisState(u=u, y=self._major(u, rising), rising=rising)
 
     def _check_u(self, u) -> float:
-        u = _finite(u, "voltage")
+        u = as_finite(u, "voltage")
         lo, hi = self.u_range
         tol = 1e-9 * (hi - lo)
         if not lo - tol <= u <= hi + tol:
@@ -309,7 +301,7 @@ class HysteresisModel:
         return min(max(u, lo), hi)
 
     def _check_target(self, target) -> float:
-        y = _finite(target, "target displacement")
+        y = as_finite(target, "target displacement")
         lo, hi = self.displacement_range
         tol = 1e-9 * max(1.0, hi - lo)
         if not lo - tol <= y <= hi + tol:
@@ -981,8 +973,8 @@ def characterise_hysteresis(microscope, axis, roi, *, u_min=None, u_max=None, n_
     from semlab.control import _default_tracker, drive_voltages
 
     lo, hi = (float(v) for v in axis.limits)
-    u_min = lo if u_min is None else _finite(u_min, "u_min")
-    u_max = hi if u_max is None else _finite(u_max, "u_max")
+    u_min = lo if u_min is None else as_finite(u_min, "u_min")
+    u_max = hi if u_max is None else as_finite(u_max, "u_max")
     if not lo <= u_min < u_max <= hi:
         raise ValueError(f"need axis limit {lo} <= u_min={u_min} < u_max={u_max} <= axis limit {hi}")
     if int(settle_frames) < 1:
@@ -991,7 +983,7 @@ def characterise_hysteresis(microscope, axis, roi, *, u_min=None, u_max=None, n_
     step_v = (u_max - u_min) / int(n_steps)
     if u_start is None:
         u_start = getattr(axis, "command", None)
-    u_start = u_min if u_start is None else _finite(u_start, "u_start")
+    u_start = u_min if u_start is None else as_finite(u_start, "u_start")
     pre = list(np.linspace(u_start, u_min, max(1, math.ceil(abs(u_start - u_min) / step_v)) + 1)[1:])
     if precondition:
         up = np.linspace(u_min, u_max, int(n_steps) + 1)[1:]
@@ -1059,7 +1051,7 @@ class CreepModel:
     """
 
     def __init__(self, gamma: float, t0: float = 0.1, memory: int = 64):
-        gamma, t0 = _finite(gamma, "creep gamma"), _finite(t0, "creep t0")
+        gamma, t0 = as_finite(gamma, "creep gamma"), as_finite(t0, "creep t0")
         if gamma < 0 or t0 <= 0 or int(memory) < 1:
             raise ValueError("creep model needs gamma >= 0, t0 > 0 and memory >= 1")
         self.gamma, self.t0, self.memory = gamma, t0, int(memory)
@@ -1124,7 +1116,7 @@ def fit_creep(t, displacement, step_px, *, t0_grid=None) -> CreepModel:
     """
     t = np.asarray(t, float)
     y = np.asarray(displacement, float)
-    step = _finite(step_px, "step_px")
+    step = as_finite(step_px, "step_px")
     good = np.isfinite(t) & np.isfinite(y) & (t > 0)
     if good.sum() < 4 or step == 0:
         raise ValueError("a creep fit needs a non-zero step and at least 4 valid samples after it")

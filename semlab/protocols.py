@@ -12,11 +12,12 @@ coordinates, x grows to the right and y downwards.
 
 from __future__ import annotations
 
+import math
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-__all__ = ["Axis", "Microscope", "check_command"]
+__all__ = ["Axis", "Microscope", "as_finite", "check_command"]
 
 
 @runtime_checkable
@@ -59,6 +60,17 @@ class Axis(Protocol):
         ...
 
 
+def as_finite(value, what: str, why: str = "") -> float:
+    """``value`` as a finite float, or a ValueError naming ``what`` (and ``why`` it matters)."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{what} {value!r} is not a number") from None
+    if not math.isfinite(v):
+        raise ValueError(f"{what} {v} is not finite" + (f"; {why}" if why else ""))
+    return v
+
+
 def check_command(volts: float, limits: tuple[float, float], name: str = "axis") -> float:
     """Validate an actuator command against the axis limits.
 
@@ -81,12 +93,7 @@ def check_command(volts: float, limits: tuple[float, float], name: str = "axis")
     ValueError
         If the command is not finite or lies outside the limits.
     """
-    try:
-        value = float(volts)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name}: command {volts!r} is not a number") from None
-    if not np.isfinite(value):
-        raise ValueError(f"{name}: command {value} is not finite; refusing to drive blind")
+    value = as_finite(volts, f"{name}: command", "refusing to drive blind")
     lo, hi = limits
     if not lo <= value <= hi:
         raise ValueError(f"{name}: command {value:.6g} V is outside the axis limits [{lo:.6g}, {hi:.6g}] V")

@@ -12,9 +12,7 @@ at 100 V from the relaxed state. Commands take effect from the next frame.
 
 from __future__ import annotations
 
-import math
-
-from ..protocols import check_command
+from ..protocols import as_finite, check_command
 from .piezo import DAC, PiezoAxis, PiezoParameters, PreisachHysteresis
 
 __all__ = [
@@ -84,12 +82,7 @@ class MacroStepper:
         ValueError
             If ``nm`` is not finite or outside :attr:`limits`.
         """
-        try:
-            v = float(nm)
-        except (TypeError, ValueError):
-            raise ValueError(f"{self.name}: position {nm!r} is not a number") from None
-        if not math.isfinite(v):
-            raise ValueError(f"{self.name}: position {v} is not finite")
+        v = as_finite(nm, f"{self.name}: position")
         lo, hi = self.limits
         if not lo <= v <= hi:
             raise ValueError(f"{self.name}: position {v:.6g} nm outside the travel [{lo:.6g}, {hi:.6g}] nm")
