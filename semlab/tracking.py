@@ -397,10 +397,8 @@ class Tracker:
             self._tws_values = tws[yb, xb].astype(np.float64)
             self._sgx, self._sgy = sgx[yb, xb].astype(np.float64), sgy[yb, xb].astype(np.float64)
             self._inside = self.contour.region[ys, xs]
-            # Noise variance of the (whitened, averaged) template at the band pixels, and the
-            # factor by which the first stage's smoothing reduces it.
+            # Noise variance of the (whitened, averaged) template at the band pixels.
             self._t_var = (1.0 - rho ** 2) * self.noise.variance(self._t_values) / self._n_averaged
-            self._smooth_gain = 1.0 / (4.0 * np.pi * self.coarse_sigma ** 2) if self.coarse_sigma > 0 else 1.0
             self._stage1_sigmas = (4.0 * self.coarse_sigma, 2.0 * self.coarse_sigma, self.coarse_sigma)
             stage1 = {}
             for k, sigma in enumerate(self._stage1_sigmas if self.coarse_sigma > 0 else ()):
@@ -414,7 +412,6 @@ class Tracker:
             # The instrument for the gain: the template smoothed (its own noise mostly averaged out).
             iv = self.photometry == "instrument"
             self._instrument = cv2.GaussianBlur(tw, (0, 0), 1.5)[yb, xb].astype(np.float64) if iv else None
-            self._instrument_s = cv2.GaussianBlur(tws, (0, 0), 1.5)[yb, xb].astype(np.float64) if iv else None
             if self.noise_weights:
                 level = cv2.GaussianBlur(template, (0, 0), 1.0)[yb, xb]
                 var = self.noise.variance(level)
@@ -423,7 +420,7 @@ class Tracker:
                 self._base_weights = None
             self._arrays = {k: getattr(self, k) for k in (
                 "_inside", "_tws_values", "_sgx", "_sgy", "_tw_values", "_gx", "_gy", "_t_var",
-                "_instrument_s", "_instrument", "_t_values")}
+                "_instrument", "_t_values")}
             self._arrays.update(stage1)
             self._apply_weights()
             self._setups = self._gn_setups(self._arrays)
