@@ -399,7 +399,7 @@ def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=N
                              exact: bool = True, curvature=None, tukey: bool = False,
                              template_variance=None, instrument=None, freeze: float = 0.01,
                              max_move: float = np.inf, setup: dict | None = None,
-                             early_stop: bool = False) -> GaussNewtonResult:
+                             early_stop: bool = False, sectors=None) -> GaussNewtonResult:
     """Inverse-compositional Gauss–Newton for a translation with gain/offset (beyond eq. 9).
 
     Minimises ``Σ wᵢ ρ(I(xᵢ + p) − g·T(xᵢ) − o)`` over the template pixels ``xᵢ`` (eq. 2 with a
@@ -477,6 +477,10 @@ def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=N
         Stop as well when the next update, extrapolated from the last two (shrinking by a
         factor of at most 0.6), would be below ``tolerance``: one iteration fewer, the answer
         within about ``tolerance`` of where the full iteration ends.
+    sectors : (K,) ndarray of int, optional
+        Pixels with the same label ``>= 0`` share a level of their own: each iteration removes
+        the sector's weighted mean residual (a local background level that the template does not
+        share); ``-1``: no level of its own.
 
     Returns
     -------
@@ -500,6 +504,11 @@ def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=N
     if not joint:
         plain_hess, rhs_basis = setup["plain_hess"], setup["rhs_basis"]
         absorbed_hess = setup.get("absorbed_hess")
+
+    if sectors is not None:
+        sec = np.asarray(sectors, np.intp)
+        n_sec = int(sec.max()) + 1
+        sec = np.where(sec < 0, n_sec, sec)  # no local level: the extra bin, whose level stays 0
 
     if exact:
         # The crop is filtered once per iteration; the band's flat indices are fixed.
@@ -547,6 +556,13 @@ def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=N
             if abs(g) < 1e-6:
                 break
         residual = samples - (g * t + o)
+        if sectors is not None:
+            # Each sector's own level: its weighted mean residual is the local background's
+            # change, not the object's displacement.
+            sw = prior * robust
+            local = np.bincount(sec, weights=sw * residual, minlength=n_sec)[:n_sec] / np.maximum(
+                np.bincount(sec, weights=sw, minlength=n_sec)[:n_sec], 1e-12)
+            residual = residual - np.append(local, 0.0)[sec]
         if huber is not None:
             z = residual * sqrt_prior
             if spread is None:

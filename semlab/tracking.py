@@ -178,6 +178,10 @@ class Tracker:
         registered frames taken near the start differs by more than this many standard errors
         from their mean over the frames taken after the object moved are static background, not
         object, and get no weight (None: keep all).
+    background_tile : int
+        ``"ic"``: the band's background pixels are grouped in tiles of this many px, each with
+        its own gray level in the full-resolution fit (the substrate where the object moved to
+        is brighter or darker at that scale); 0: one background level.
 
     Examples
     --------
@@ -202,7 +206,7 @@ class Tracker:
                  max_iterations: int = 20, min_score: float | None = None, min_relative_score: float = 0.5,
                  coarse_sigma: float = 1.0, jacobian_sigma: float = 0.7, jacobian_sigma_first: float = 2.0,
                  normal_sigma: float = 0.0, photometry: str = "regions", inner_px: int = 0,
-                 consistency_cut: float | None = 6.0):
+                 consistency_cut: float | None = 6.0, background_tile: int = 8):
         if method not in METHODS:
             raise ValueError(f"unknown method {method!r}; choose one of {METHODS}")
         if int(search_size) != search_size or search_size < 16:
@@ -243,6 +247,9 @@ class Tracker:
         if consistency_cut is not None and not consistency_cut > 0:
             raise ValueError(f"consistency_cut must be > 0 or None, got {consistency_cut!r}")
         self.consistency_cut = consistency_cut
+        if int(background_tile) != background_tile or background_tile < 0:
+            raise ValueError(f"background_tile must be a non-negative integer, got {background_tile!r}")
+        self.background_tile = int(background_tile)
         default_min = {"ic": 0.1, "contour": 0.3, "ssd": 0.3, "hb": 0.3}[method]
         self.min_score = default_min if min_score is None else float(min_score)
         self.min_relative_score = float(min_relative_score)
@@ -397,6 +404,7 @@ class Tracker:
             self._tws_values = tws[yb, xb].astype(np.float64)
             self._sgx, self._sgy = sgx[yb, xb].astype(np.float64), sgy[yb, xb].astype(np.float64)
             self._inside = self.contour.region[ys, xs]
+            self._sector = self._background_sectors(xs, ys, self._inside)
             # Noise variance of the (whitened, averaged) template at the band pixels.
             self._t_var = (1.0 - rho ** 2) * self.noise.variance(self._t_values) / self._n_averaged
             self._stage1_sigmas = (4.0 * self.coarse_sigma, 2.0 * self.coarse_sigma, self.coarse_sigma)
@@ -420,7 +428,7 @@ class Tracker:
                 self._base_weights = None
             self._arrays = {k: getattr(self, k) for k in (
                 "_inside", "_tws_values", "_sgx", "_sgy", "_tw_values", "_gx", "_gy", "_t_var",
-                "_instrument", "_t_values")}
+                "_instrument", "_t_values", "_sector")}
             self._arrays.update(stage1)
             self._apply_weights()
             self._setups = self._gn_setups(self._arrays)
@@ -647,7 +655,7 @@ class Tracker:
                                        template_variance=None if (two_level or iv) else arrays["_t_var"],
                                        instrument=arrays["_instrument"] if iv else None,
                                        max_move=limit, setup=setups.get("fine"),
-                                       early_stop=mature and not careful, **common)
+                                       early_stop=mature and not careful, sectors=arrays["_sector"], **common)
         moved = float(np.max(np.abs(fit.shift - np.asarray(shift0, float)))) if np.all(np.isfinite(fit.shift)) else np.inf
         if moved > limit:
             fit.converged = False
@@ -656,6 +664,24 @@ class Tracker:
                           borderMode=cv2.BORDER_REPLICATE).reshape(-1) if np.isfinite(moved) else None
         score = weighted_ncc(plain, arrays["_t_values"], fit.weights) if plain is not None else 0.0
         return fit, score
+
+    def _background_sectors(self, xs, ys, inside):
+        """Background band pixels grouped in ``background_tile``-px tiles, each with its own level.
+
+        The background next to the object is not part of it: where the object moves to, the
+        substrate around it is another one, brighter or darker at the scale of a few px (texture,
+        shading). Fitted with the template's background, such a local change of level biases the
+        edge by a fraction of its width; each tile's own level absorbs it. Object pixels (and all
+        pixels when the option is off, ``background_tile=0``) get -1: no local level.
+        """
+        if self.background_tile <= 0:
+            return None
+        tile = self.background_tile
+        key = (ys // tile) * (self.band.shape[1] // tile + 1) + xs // tile
+        _, labels = np.unique(key[~inside], return_inverse=True)
+        sector = np.full(len(xs), -1, np.intp)
+        sector[~inside] = labels
+        return sector
 
     def _threshold(self) -> float:
         if self._scores:

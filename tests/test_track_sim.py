@@ -87,12 +87,15 @@ def test_fluctuation_and_clutter_moving_probe_followed(kind):
     assert s["loss_rate"] == 0
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "measured (seed 2, 50 frames): RMSE 2.72x the one-frame bound on gray_fluctuation, 2.14x on "
-    "clutter_occluder with the probe moving. Part of it cannot go: the displacement carries frame 0's "
-    "own error (bound sqrt(2) x the one-frame CRB); the rest is static background in the band that does "
-    "not move with the probe, and photometric fluctuation. A matter for semlab/tracking.py."))
-@pytest.mark.parametrize("kind", ["gray_fluctuation", "clutter_occluder"])
+_GRAY_SHORT = pytest.mark.xfail(strict=True, reason=(
+    "measured (seed 2, 50 frames): RMSE 2.58x the one-frame bound on gray_fluctuation with the probe "
+    "moving (clutter_occluder 2.00x). Part of it cannot go: the displacement carries frame 0's own error "
+    "(bound sqrt(2) x the one-frame CRB); the rest is static background in the band that pulls the "
+    "probe back while it is within a few px of where the template was taken. A matter for "
+    "semlab/tracking.py."))
+
+
+@pytest.mark.parametrize("kind", [pytest.param("gray_fluctuation", marks=_GRAY_SHORT), "clutter_occluder"])
 def test_fluctuation_and_clutter_moving_probe_near_the_bound(kind):
     # Theory: an efficient tracker with a 20-frame template has RMSE ~ sqrt(1 + 1/20) x the bound
     # (frame 0's; along the sweep the moved ROI's bound is up to 13 % above it), plus an
