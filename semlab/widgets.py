@@ -1,7 +1,7 @@
 """Live widgets for the workbench: thin ipywidgets shells over plain semlab functions.
 
-* :class:`TemplateExplorer` -- pick the ROI (a click point and a size, or motion differencing), tune the
-  contour-template identification (Gaussian σ, Otsu or manual threshold, morphology) and the Canny edge
+* :class:`TemplateExplorer` -- pick the ROI (a mouse click on an overview of the frame, click sliders and a
+  size, or motion differencing), tune the contour-template identification (Gaussian σ, Otsu or manual threshold, morphology) and the Canny edge
   detector (adaptive, eq. 10, or manual T_l/T_h); shows the ROI, the binary image with the contour and the
   edge map live (the paper's Figs. 1-3). ``explorer.params`` goes straight into :func:`semlab.track`.
 * :class:`TrackingPlayer` -- a frame slider and a Play button over a tracked sequence, with the contour
@@ -21,6 +21,7 @@ from __future__ import annotations
 import html
 import time
 
+import cv2
 import numpy as np
 
 from .edges import adaptive_canny_thresholds, canny_edges
@@ -28,11 +29,14 @@ from .plots import figure_png, plot_step_response, plot_track_xy, show_edges, sh
 from .roi import as_gray_float, check_roi, clip_window, roi_centre, roi_from_click, roi_from_motion
 from .template import identify_contour_template, to_uint8
 
-__all__ = ["ServoPanel", "TemplateExplorer", "TrackingPlayer", "explore_template", "player_state"]
+__all__ = ["ServoPanel", "TemplateExplorer", "TrackingPlayer", "display_to_frame", "explore_template",
+           "overview_image", "player_state"]
 
 #: CSS classes put on the widgets (``add_class``), for the browser test and for styling.
 THRESHOLD_CLASS = "semlab-threshold"
 READOUT_CLASS = "semlab-readout"
+OVERVIEW_CLASS = "semlab-overview"
+CLICK_X_CLASS, CLICK_Y_CLASS = "semlab-click-x", "semlab-click-y"
 
 _SLIDER_STYLE = {"description_width": "150px"}
 
@@ -143,8 +147,102 @@ def render_template_figure(frame, r, *, pixel_size_nm=None, size=(14, 3.9)):
     return axes[0].figure
 
 
+def display_to_frame(display_xy, display_size, frame_shape) -> tuple[float, float]:
+    """Frame coordinates of a mouse position on a displayed image of the whole frame.
+
+    The image may be downscaled when it is encoded and scaled again by CSS: only its size *as displayed*
+    matters. The displayed image spans the frame from pixel edge to pixel edge (frame x from -0.5 to
+    ``cols - 0.5``), and a mouse position ``k`` (whole CSS px, as the browser reports it) stands for the
+    CSS pixel ``[k, k + 1)``, whose centre is taken; so at 1:1 display CSS pixel ``k`` is frame pixel ``k``.
+    x and y are scaled separately, so a stretched display converts correctly too.
+
+    Parameters
+    ----------
+    display_xy : (float, float)
+        Mouse position from the displayed image's top-left corner, CSS px: ipyevents' ``relativeX,
+        relativeY`` (or ``offsetX, offsetY`` for an image without border and padding).
+    display_size : (float, float)
+        Width and height of the image as displayed, CSS px: ipyevents' ``boundingRectWidth,
+        boundingRectHeight``.
+    frame_shape : (rows, cols)
+
+    Returns
+    -------
+    (x, y) : (float, float)
+        Frame px, clipped into ``[0, cols - 1] x [0, rows - 1]`` (a click on the image's last CSS pixel
+        may land half a frame pixel outside).
+
+    Raises
+    ------
+    ValueError
+        A display size that is not positive, or a position that is not finite.
+
+    Examples
+    --------
+    A 640x480 frame shown 320 px wide: CSS px 10 covers frame x 20..21, so its centre is 20.5.
+
+    >>> display_to_frame((10, 0), (320, 240), (480, 640))
+    (20.5, 0.5)
+    """
+    rows, cols = (int(v) for v in frame_shape[:2])
+    dx, dy = (float(v) for v in display_xy)
+    width, height = (float(v) for v in display_size)
+    if not (width > 0 and height > 0 and np.isfinite(width) and np.isfinite(height)):
+        raise ValueError(f"display size {display_size!r} must be positive (is the image hidden?)")
+    if not (np.isfinite(dx) and np.isfinite(dy)):
+        raise ValueError(f"display position {display_xy!r} is not finite")
+    x = (dx + 0.5) * cols / width - 0.5
+    y = (dy + 0.5) * rows / height - 0.5
+    return float(np.clip(x, 0, cols - 1)), float(np.clip(y, 0, rows - 1))
+
+
+def overview_image(frame, roi, click=None, *, max_width=440, quality=85) -> bytes:
+    """The whole frame as a JPEG, at most ``max_width`` px wide, with the ROI as a yellow box.
+
+    Drawn with OpenCV rather than matplotlib: no axes or margins, so the image's pixels map linearly onto
+    the frame (:func:`display_to_frame`), and it renders in a few milliseconds. JPEG, because a noisy SEM
+    frame makes a PNG ten times larger, and the image travels to the browser on every click.
+
+    Parameters
+    ----------
+    frame : (M, N) array_like
+    roi : (x, y, w, h)
+    click : (x, y), optional
+        Drawn as a small cyan cross, px.
+    max_width : int
+        The frame is downscaled (never upscaled) to this width.
+    quality : int
+        JPEG quality, 0-100.
+    """
+    gray = to_uint8(frame)
+    rows, cols = gray.shape
+    scale = min(1.0, max_width / cols)
+    size = (max(1, round(cols * scale)), max(1, round(rows * scale)))
+    small = cv2.resize(gray, size, interpolation=cv2.INTER_AREA) if scale < 1 else gray
+    rgb = cv2.cvtColor(small, cv2.COLOR_GRAY2BGR)
+    sx, sy = size[0] / cols, size[1] / rows
+    x, y, w, h = roi
+    # Frame px edges x - 0.5 .. x + w - 0.5 become display edges x*s .. (x + w)*s.
+    cv2.rectangle(rgb, (round(x * sx), round(y * sy)), (round((x + w) * sx) - 1, round((y + h) * sy) - 1),
+                  (0, 215, 255), 2)
+    if click is not None:
+        cx, cy = (round((float(v) + 0.5) * s - 0.5) for v, s in zip(click, (sx, sy), strict=True))
+        cv2.drawMarker(rgb, (cx, cy), (255, 255, 0), cv2.MARKER_CROSS, 9, 1)
+    _, jpeg = cv2.imencode(".jpg", rgb, [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
+    return jpeg.tobytes()
+
+
 class TemplateExplorer:
     """Pick the ROI and tune the contour template and Canny edges live (paper, Figs. 1-3).
+
+    **Choosing the ROI by a click** (the paper's first method, Fig. 2b): click the overview -- the whole
+    frame, top left, with the current ROI as a yellow box -- near the probe tip. The click becomes
+    ``click_x, click_y`` (frame px, whatever size the overview is displayed at; :func:`display_to_frame`),
+    a ``roi_size`` ROI is cut around it (:func:`semlab.roi.roi_from_click`, shifted to lie inside the frame)
+    and the template, the edges and the readout are recomputed. The ``click x/y`` sliders do the same from
+    the keyboard or from code (``explorer.controls["click_x"].value = 320``). The clickable overview needs
+    the ``ipyevents`` package (and its JupyterLab extension); without it the overview is left out and the
+    sliders alone move the ROI.
 
     Parameters
     ----------
@@ -161,6 +259,8 @@ class TemplateExplorer:
     motion_frames : sequence of 2-D arrays, optional
         Frames of the probe stepping along x or y; enables the "ROI from motion" button (the paper's
         second ROI method, :func:`semlab.roi.roi_from_motion`).
+    overview_width : int
+        Width of the clickable overview, px (the frame is downscaled to it, never upscaled).
     **params
         Initial ``sigma, threshold, morph_kernel, morph_iterations, canny_sigma, canny_low, canny_high``
         (as :func:`explore_template`).
@@ -179,12 +279,21 @@ class TemplateExplorer:
         adaptive, canny_sigma, canny`` -- set their ``.value`` to drive the explorer from code.
     image, readout, ui : ipywidgets
         The rendered figure (PNG), the text readout and the whole panel.
+    overview : ipywidgets.Image or None
+        The clickable frame overview (``None`` without ipyevents).
+    events : ipyevents.Event or None
+        Watches ``click`` on ``overview``; its messages go to ``_on_overview_event``.
     """
 
     def __init__(self, frame, roi=None, *, click=None, roi_size=200, pixel_size_nm=None, motion_frames=None,
-                 sigma=2.0, threshold=None, morph_kernel=3, morph_iterations=1, canny_sigma=1.0,
-                 canny_low=None, canny_high=None):
+                 overview_width=440, sigma=2.0, threshold=None, morph_kernel=3, morph_iterations=1,
+                 canny_sigma=1.0, canny_low=None, canny_high=None):
         import ipywidgets as w
+
+        try:
+            from ipyevents import Event
+        except ImportError:   # the sliders alone still move the ROI
+            Event = None
 
         self.frame = np.asarray(frame)
         image = as_gray_float(self.frame)
@@ -208,6 +317,8 @@ class TemplateExplorer:
         c = {}
         c["click_x"] = slider(w.IntSlider, "click x (px)", round(click[0]), 0, cols - 1, 1)
         c["click_y"] = slider(w.IntSlider, "click y (px)", round(click[1]), 0, rows - 1, 1)
+        c["click_x"].add_class(CLICK_X_CLASS)
+        c["click_y"].add_class(CLICK_Y_CLASS)
         c["roi_size"] = slider(w.IntSlider, "ROI size (px)", int(roi_size), 16, min(rows, cols), 2)
         c["motion"] = w.Button(description="ROI from motion", disabled=motion_frames is None,
                                tooltip="background subtraction over frames of the probe stepping")
@@ -231,8 +342,18 @@ class TemplateExplorer:
         self.image = w.Image(format="png", layout=w.Layout(width="100%"))
         self.readout = w.HTML()
         self.readout.add_class(READOUT_CLASS)
-        left = w.VBox([w.HTML("<b>ROI</b> (click near the tip)"), c["click_x"], c["click_y"], c["roi_size"],
-                       c["motion"]])
+        self._overview_width = int(overview_width)
+        self._overview_drawn = None
+        self.overview = self.events = None
+        if Event is not None:
+            self.overview = w.Image(format="jpeg", layout=w.Layout(width=f"{self._overview_width}px"))
+            self.overview.add_class(OVERVIEW_CLASS)
+            self.events = Event(source=self.overview, watched_events=["click"])
+            self.events.on_dom_event(self._on_overview_event)
+            heading = [w.HTML("<b>ROI</b>: click the frame near the probe tip"), self.overview]
+        else:
+            heading = [w.HTML("<b>ROI</b>: slide the click point near the probe tip")]
+        left = w.VBox([*heading, c["click_x"], c["click_y"], c["roi_size"], c["motion"]])
         middle = w.VBox([w.HTML("<b>Contour template</b>"), c["sigma"], c["otsu"], c["threshold"],
                          c["morph_kernel"], c["morph_iterations"]])
         right = w.VBox([w.HTML("<b>Canny edges</b>"), c["adaptive"], c["canny_sigma"], c["canny"]])
@@ -288,7 +409,22 @@ class TemplateExplorer:
             self.controls["adaptive"].value = False
         self.update()
 
-    def _on_click(self, change):
+    def _on_overview_event(self, event):
+        """An ipyevents message from the overview: a click there moves the click point and the ROI."""
+        if event.get("event") != "click":
+            return
+        try:
+            x, y = display_to_frame((event["relativeX"], event["relativeY"]),
+                                    (event["boundingRectWidth"], event["boundingRectHeight"]),
+                                    self.frame.shape)
+        except (KeyError, TypeError, ValueError):
+            return   # a message without usable geometry (e.g. the image was hidden): nothing to do
+        c = self.controls
+        with self._sync():
+            c["click_x"].value, c["click_y"].value = round(x), round(y)
+        self._on_click()
+
+    def _on_click(self, change=None):
         if self._syncing:
             return
         c = self.controls
@@ -333,11 +469,20 @@ class TemplateExplorer:
                 c["canny"].max = float(np.ceil(top))
                 c["canny"].value = [float(round(lo)), float(round(hi))]
         self.readout.value = _readout_html(self.result, self.pixel_size_nm)
+        self._draw_overview()
         t0 = time.perf_counter()
         fig = render_template_figure(self.frame, self.result, pixel_size_nm=self.pixel_size_nm)
         self.image.value = figure_png(fig)
         self.render_ms = 1e3 * (time.perf_counter() - t0)
         return self.result
+
+    def _draw_overview(self):
+        c = self.controls
+        state = (self._roi, c["click_x"].value, c["click_y"].value)
+        if self.overview is None or state == self._overview_drawn:
+            return
+        self.overview.value = overview_image(self.frame, self._roi, state[1:], max_width=self._overview_width)
+        self._overview_drawn = state
 
     def _repr_mimebundle_(self, **kwargs):
         return self.ui._repr_mimebundle_(**kwargs)

@@ -10,14 +10,25 @@ from __future__ import annotations
 
 import itertools
 import math
+import sys
 
+import cv2
 import numpy as np
 import pandas as pd
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.ndimage import gaussian_filter
 from scipy.stats import norm
 
-from semlab.widgets import TemplateExplorer, TrackingPlayer, explore_template, player_state
+from semlab.widgets import (
+    TemplateExplorer,
+    TrackingPlayer,
+    display_to_frame,
+    explore_template,
+    overview_image,
+    player_state,
+)
 
 BG, FG = 40.0, 200.0      # background and probe gray levels
 R, BLUR = 30.0, 2.0       # disc radius and edge blur, px
@@ -160,6 +171,145 @@ def test_explore_template_matches_the_explorer(explorer):
     direct = explore_template(explorer.frame, explorer.roi, **explorer.params)
     assert direct["area_px"] == explorer.result["area_px"]
     assert direct["n_edges"] == explorer.result["n_edges"]
+
+
+# --------------------------------------------------------------------------------------------
+# The ROI by a mouse click on the overview (paper: "the operator clicks the mouse near the probe tip, and a
+# 200x200 ROI is obtained automatically", Fig. 2b)
+
+FULL = (480, 640)   # rows, cols: the paper's 640x480 frames
+
+
+def full_frame(centre=(250.0, 150.0)):
+    yy, xx = np.mgrid[: FULL[0], : FULL[1]]
+    inside = ((xx - centre[0]) ** 2 + (yy - centre[1]) ** 2 <= R**2).astype(float)
+    return np.clip(BG + (FG - BG) * gaussian_filter(inside, BLUR), 0, 255).astype(np.uint8)
+
+
+def click_message(rel_x, rel_y, width, height, event="click"):
+    """What ipyevents 2 sends for a mouse event on an Image (the keys of its ``_send_dom_event``)."""
+    return {"event": event, "type": event, "altKey": False, "ctrlKey": False, "metaKey": False,
+            "shiftKey": False, "timeStamp": 1234.5, "button": 0, "buttons": 0,
+            "offsetX": rel_x, "offsetY": rel_y, "layerX": rel_x, "layerY": rel_y, "x": rel_x + 30,
+            "y": rel_y + 200, "clientX": rel_x + 30, "clientY": rel_y + 200, "pageX": rel_x + 30,
+            "pageY": rel_y + 200, "screenX": rel_x + 30, "screenY": rel_y + 300,
+            "relativeX": rel_x, "relativeY": rel_y, "boundingRectWidth": width, "boundingRectHeight": height,
+            "boundingRectLeft": 30.0, "boundingRectTop": 200.0, "boundingRectRight": 30.0 + width,
+            "boundingRectBottom": 200.0 + height, "dataX": 0, "dataY": 0, "arrayX": 0, "arrayY": 0,
+            "movementX": 0, "movementY": 0,
+            "target": {"tagName": "IMG", "id": "", "className": "jupyter-widget-image semlab-overview"}}
+
+
+def test_display_to_frame_is_the_identity_at_one_to_one():
+    # Displayed at its own size, CSS pixel k is frame pixel k.
+    for k in (0, 1, 37, 639):
+        assert display_to_frame((k, min(k, 479)), (640, 480), FULL) == (k, min(k, 479))
+
+
+def test_display_to_frame_undoes_css_scaling():
+    # Shown 160x120 px (a quarter), CSS pixel 0 covers frame x -0.5..3.5 (centre 1.5), CSS pixel 159 covers
+    # 635.5..639.5 (centre 637.5); the same place on a display twice as large gives the same frame point.
+    assert display_to_frame((0, 0), (160, 120), FULL) == (1.5, 1.5)
+    assert display_to_frame((159, 119), (160, 120), FULL) == (637.5, 477.5)
+    assert display_to_frame((40, 30), (160, 120), FULL) == pytest.approx(display_to_frame((80.5, 60.5), (320, 240), FULL))
+    # Upscaled by CSS (a 200x160 frame shown 500x400 px): 2.5 CSS px per frame px.
+    assert display_to_frame((250, 200), (500, 400), (160, 200)) == pytest.approx((99.7, 79.7))
+    # Stretched (x by 2, y by 4) is still right: the axes are scaled separately.
+    assert display_to_frame((100, 100), (320, 120), FULL) == (200.5, 401.5)
+    # A click on the border or just past it stays inside the frame.
+    assert display_to_frame((320, -3), (320, 240), FULL) == (639.0, 0.0)
+
+
+def test_display_to_frame_rejects_a_hidden_image():
+    with pytest.raises(ValueError, match="display size"):
+        display_to_frame((3, 4), (0, 0), FULL)
+    with pytest.raises(ValueError, match="not finite"):
+        display_to_frame((float("nan"), 4), (320, 240), FULL)
+
+
+@settings(max_examples=200, deadline=None)
+@given(width=st.integers(20, 2000), height=st.integers(20, 2000), fx=st.floats(0, 0.999), fy=st.floats(0, 0.999))
+def test_a_click_lands_in_the_frame_area_under_the_css_pixel(width, height, fx, fy):
+    rows, cols = FULL
+    kx, ky = int(fx * width), int(fy * height)
+    x, y = display_to_frame((kx, ky), (width, height), FULL)
+    # CSS pixel k covers frame [k s - 0.5, (k + 1) s - 0.5], s = frame px per CSS px; both ends clipped into
+    # the frame's pixel centres.
+    sx, sy = cols / width, rows / height
+    assert np.clip(kx * sx - 0.5, 0, cols - 1) - 1e-9 <= x <= np.clip((kx + 1) * sx - 0.5, 0, cols - 1) + 1e-9
+    assert np.clip(ky * sy - 0.5, 0, rows - 1) - 1e-9 <= y <= np.clip((ky + 1) * sy - 0.5, 0, rows - 1) + 1e-9
+
+
+@pytest.fixture
+def full_explorer():
+    return TemplateExplorer(full_frame(), click=(250, 150), roi_size=200, sigma=1.0)
+
+
+def test_a_click_on_the_overview_moves_the_roi_there(full_explorer):
+    ex = full_explorer
+    assert ex.overview is not None, "ipyevents is a dependency: the overview should be clickable"
+    assert ex.events.source is ex.overview and ex.events.watched_events == ["click"]
+    shown = ex.overview.value
+    # The overview shown 256x192 px by CSS (2.5 frame px per CSS px): CSS pixel (100, 60) covers frame
+    # x 249.5..252, y 149.5..152, centre (250.75, 150.75): the click point becomes (251, 151).
+    ex._on_overview_event(click_message(100, 60, 256.0, 192.0))
+    assert (ex.controls["click_x"].value, ex.controls["click_y"].value) == (251, 151)
+    x, y, w, h = ex.roi
+    assert (w, h) == (200, 200)
+    assert abs(x + (w - 1) / 2 - 251) <= 0.5 and abs(y + (h - 1) / 2 - 151) <= 0.5
+    assert ex.result["roi"] == ex.roi and ex.result["ok"]
+    assert f"<b>ROI</b> {ex.roi}" in ex.readout.value
+    assert ex.overview.value != shown
+
+
+def test_a_click_near_the_border_gives_a_roi_clipped_into_the_frame(full_explorer):
+    ex = full_explorer
+    # Bottom-right corner: (625.75, 475.75) in the frame; the 200x200 ROI is shifted, not shrunk.
+    ex._on_overview_event(click_message(250, 190, 256.0, 192.0))
+    assert (ex.controls["click_x"].value, ex.controls["click_y"].value) == (626, 476)
+    assert ex.roi == (640 - 200, 480 - 200, 200, 200)
+    assert "<b>ROI</b> (440, 280, 200, 200)" in ex.readout.value
+    # Top-left, on a display CSS-scaled to full size.
+    ex._on_overview_event(click_message(3, 2, 640.0, 480.0))
+    assert ex.roi == (0, 0, 200, 200)
+
+
+def test_other_events_and_hidden_images_leave_the_roi_alone(full_explorer):
+    ex = full_explorer
+    roi, result = ex.roi, ex.result
+    ex._on_overview_event(click_message(250, 190, 256.0, 192.0, event="mousemove"))
+    ex._on_overview_event(click_message(250, 190, 0.0, 0.0))
+    ex._on_overview_event({"event": "click"})
+    assert ex.roi == roi and ex.result is result
+
+
+def test_roi_size_applies_to_the_next_click(full_explorer):
+    ex = full_explorer
+    ex.controls["roi_size"].value = 120
+    ex._on_overview_event(click_message(100, 60, 256.0, 192.0))
+    x, y, w, h = ex.roi
+    assert (w, h) == (120, 120)
+    assert abs(x + (w - 1) / 2 - 251) <= 0.5 and abs(y + (h - 1) / 2 - 151) <= 0.5
+
+
+def test_overview_image_shows_the_whole_frame_with_the_roi_box():
+    frame = full_frame()
+    img = cv2.imdecode(np.frombuffer(overview_image(frame, (200, 100, 200, 200), max_width=320), np.uint8),
+                       cv2.IMREAD_COLOR)
+    assert img.shape == (240, 320, 3)
+    # The box's left edge: frame x 199.5 -> display column 100, rows 50..149; yellow (BGR) against gray.
+    b, g, r = img[100, 100].astype(int)
+    assert r > 180 and g > 150 and b < 100, (b, g, r)
+    b, g, r = img[100, 130].astype(int)   # inside the box: gray
+    assert abs(r - b) < 30
+
+
+def test_without_ipyevents_the_sliders_alone_move_the_roi(monkeypatch):
+    monkeypatch.setitem(sys.modules, "ipyevents", None)   # ``import ipyevents`` now raises ImportError
+    ex = TemplateExplorer(full_frame(), click=(250, 150), roi_size=200)
+    assert ex.overview is None and ex.events is None
+    ex.controls["click_x"].value = 600
+    assert ex.roi == (440, 50, 200, 200)
 
 
 # --------------------------------------------------------------------------------------------
