@@ -2,9 +2,12 @@
 
 The test starts JupyterLab on a free localhost port (token auth, no browser, temporary config and a
 temporary copy of ``notebooks/`` so that nothing the browser saves lands in git), opens
-``01_contour_template.ipynb``, runs all cells from the *Run* menu, waits for the kernel to go idle, moves the
-template explorer's threshold slider with the keyboard and asserts that the displayed contour readout
-changes. Screenshots land in ``test-output/browser/``.
+``01_contour_template.ipynb``, runs all cells from the *Run* menu and waits for the kernel to go idle (once, for
+both tests). Then it moves the template explorer's threshold slider with the keyboard and asserts that the
+displayed contour readout changes, and it clicks the explorer's frame overview (the paper's "click near the
+probe tip", through ipyevents) at known places -- at the overview's own size and after CSS has shrunk it --
+and asserts that the readout shows the 200x200 ROI around each click, shifted inside the frame at the
+border. Screenshots land in ``test-output/browser/``.
 
 It is skipped, with a message, only when ``/usr/bin/chromium`` is missing (``make test`` installs it).
 """
@@ -41,6 +44,9 @@ CHROMIUM_ARGS = [
 # CSS classes the widgets put on themselves (``widget.add_class``) so the browser can find them.
 SLIDER_CLASS = "semlab-threshold"
 READOUT_CLASS = "semlab-readout"
+OVERVIEW_CLASS = "semlab-overview"
+CLICK_X_CLASS, CLICK_Y_CLASS = "semlab-click-x", "semlab-click-y"
+ROI_SIZE = 200   # the notebook's ROI_SIZE: the paper's 200x200 px at 3,000x
 
 pytestmark = [
     pytest.mark.browser,
@@ -201,10 +207,8 @@ def _run_all_cells(page) -> None:
     page.locator(".lm-Menu-itemLabel", has_text="Run All Cells").first.click()
 
 
-def run_notebook_and_move_slider(page, lab: Lab, notebook: str, shots: Path) -> tuple[str, str]:
-    """Open ``notebook``, run it, press the threshold slider's arrow keys; return readouts before/after."""
-    from playwright.sync_api import TimeoutError as PlaywrightTimeout
-
+def open_and_run(page, lab: Lab, notebook: str) -> None:
+    """Open ``notebook``, run all its cells from the menu, and fail on any traceback."""
     page.goto(lab.url(notebook), wait_until="domcontentloaded", timeout=60_000)
     page.wait_for_selector(".jp-NotebookPanel .jp-Notebook .jp-Cell", timeout=60_000)
     _wait_kernel_idle(page, 90)
@@ -219,6 +223,11 @@ def run_notebook_and_move_slider(page, lab: Lab, notebook: str, shots: Path) -> 
         page.wait_for_timeout(500)
     tracebacks = page.evaluate(JS_TRACEBACKS)
     assert not tracebacks, f"{notebook} raised in the browser:\n" + "\n---\n".join(tracebacks)
+
+
+def move_slider(page, shots: Path) -> tuple[str, str]:
+    """Press the threshold slider's arrow keys; return the readouts before and after."""
+    from playwright.sync_api import TimeoutError as PlaywrightTimeout
 
     slider = page.locator(f".{SLIDER_CLASS}").first
     readout = page.locator(f".{READOUT_CLASS}").first
@@ -257,33 +266,146 @@ def run_notebook_and_move_slider(page, lab: Lab, notebook: str, shots: Path) -> 
     return before, after
 
 
+JS_READOUT_CHANGED = """([sel, old]) => { const e = document.querySelector(sel); return e && e.innerText !== old; }"""
+
+# Record where a click lands the way ipyevents 2 measures it (``relativeX = round(clientX - rect.left)`` and the
+# bounding rectangle), so the test can tell what the kernel was sent.
+JS_RECORD_CLICKS = """(el) => {
+  window.__semlabClicks = [];
+  el.addEventListener('click', e => {
+    const r = el.getBoundingClientRect();
+    window.__semlabClicks.push({x: Math.round(e.clientX - r.left), y: Math.round(e.clientY - r.top),
+                                width: r.width, height: r.height});
+  });
+}"""
+
+
+def _slider_max(page, cls: str) -> int | None:
+    """The ``max`` of an ipywidgets IntSlider, read from its noUiSlider handle."""
+    handle = page.locator(f".{cls} .noUi-handle").first
+    value = handle.get_attribute("aria-valuemax") if handle.count() else None
+    return round(float(value)) if value else None
+
+
+def _roi_in(readout: str) -> tuple[int, ...] | None:
+    m = re.search(r"ROI\s*\((\d+),\s*(\d+),\s*(\d+),\s*(\d+)\)", readout)
+    return tuple(int(v) for v in m.groups()) if m else None
+
+
+def click_overview(page, fraction: tuple[float, float], shots: Path, name: str) -> dict:
+    """Click the overview at ``fraction`` of its displayed width and height; wait for the ROI readout to change.
+
+    Returns the click as the browser measured it (``x, y, width, height``, CSS px) and the readouts.
+    """
+    overview = page.locator(f".{OVERVIEW_CLASS}").first
+    readout = page.locator(f".{READOUT_CLASS}").first
+    overview.scroll_into_view_if_needed()
+    box = overview.bounding_box()
+    before = readout.inner_text()
+    n = page.evaluate("() => window.__semlabClicks.length")
+    overview.click(position={"x": fraction[0] * box["width"], "y": fraction[1] * box["height"]})
+    page.wait_for_function(JS_READOUT_CHANGED, arg=[f".{READOUT_CLASS}", before], timeout=30_000, polling=250)
+    page.wait_for_timeout(300)
+    clicks = page.evaluate("() => window.__semlabClicks")
+    assert len(clicks) == n + 1, f"the overview saw {len(clicks) - n} clicks, expected one"
+    page.screenshot(path=str(shots / f"click-{name}.png"))
+    return {**clicks[-1], "before": before, "after": readout.inner_text()}
+
+
 def _contour_area(readout: str) -> float | None:
     m = re.search(r"contour area\s+([\d.]+)\s*px", readout)
     return float(m.group(1)) if m else None
 
 
-@pytest.mark.timeout(300)
-def test_template_explorer_slider_moves_the_readout(lab):
+@pytest.fixture(scope="module")
+def notebook_page(lab):
+    """A chromium page showing notebook 01, run to the end in JupyterLab (shared by the tests below)."""
     from playwright.sync_api import sync_playwright
 
     assert NOTEBOOK.exists(), f"{NOTEBOOK} is missing"
-    shots = OUTPUT
-    shots.mkdir(parents=True, exist_ok=True)
+    OUTPUT.mkdir(parents=True, exist_ok=True)
     with sync_playwright() as p:
         browser = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS)
         try:
             page = browser.new_page(viewport={"width": 1400, "height": 1000})
             try:
-                before, after = run_notebook_and_move_slider(page, lab, NOTEBOOK.name, shots)
+                open_and_run(page, lab, NOTEBOOK.name)
             except Exception:
-                page.screenshot(path=str(shots / "failure.png"))
-                (shots / "jupyterlab.log").write_text(lab.log())
+                _save_failure(page, lab)
                 raise
+            yield page
         finally:
             browser.close()
+
+
+def _save_failure(page, lab: Lab) -> None:
+    page.screenshot(path=str(OUTPUT / "failure.png"))
+    (OUTPUT / "jupyterlab.log").write_text(lab.log())
+
+
+@pytest.mark.timeout(300)
+def test_template_explorer_slider_moves_the_readout(notebook_page, lab):
+    try:
+        before, after = move_slider(notebook_page, OUTPUT)
+    except Exception:
+        _save_failure(notebook_page, lab)
+        raise
     area_before, area_after = _contour_area(before), _contour_area(after)
     assert area_before is not None, f"no contour area in the readout before the slider moved: {before!r}"
     assert "manual" in after, f"the threshold did not switch to manual: {after!r}"
     # A brighter threshold on a bright probe leaves fewer pixels above it: the area must shrink.
     assert area_after is not None and area_after < area_before, (
         f"moving the threshold slider up did not shrink the contour area: {before!r} -> {after!r}")
+
+
+@pytest.mark.timeout(300)
+def test_a_click_on_the_overview_cuts_the_roi_around_it(notebook_page, lab):
+    from semlab.roi import clip_window
+    from semlab.widgets import display_to_frame
+
+    page = notebook_page
+    overview = page.locator(f".{OVERVIEW_CLASS}").first
+    try:
+        overview.wait_for(state="visible", timeout=30_000)
+        overview.evaluate(JS_RECORD_CLICKS)
+        # The frame size, from the click sliders' ranges (0 .. cols - 1, 0 .. rows - 1).
+        cols, rows = (_slider_max(page, c) for c in (CLICK_X_CLASS, CLICK_Y_CLASS))
+        assert cols and rows, "could not read the frame size from the click sliders"
+        cols, rows = cols + 1, rows + 1
+        clicks = [("inside", (0.3, 0.4), None)]
+        # CSS shrinks the overview to 60 %: the same conversion must still find the frame point.
+        clicks.append(("css-scaled", (0.8, 0.25), "264px"))
+        # The bottom-right corner: the ROI is shifted into the frame, not cut short.
+        clicks.append(("corner", (0.99, 0.99), None))
+        results = []
+        for name, fraction, css_width in clicks:
+            if css_width:
+                overview.evaluate("(el, w) => { el.style.width = w; }", css_width)
+                page.wait_for_timeout(300)
+            results.append((name, fraction, click_overview(page, fraction, OUTPUT, name)))
+    except Exception:
+        _save_failure(page, lab)
+        raise
+
+    for name, fraction, c in results:
+        roi = _roi_in(c["after"])
+        assert roi is not None, f"{name}: no ROI in the readout {c['after']!r}"
+        assert roi != _roi_in(c["before"]), f"{name}: the click did not move the ROI: {c['before']!r}"
+        # What the kernel was sent -> the frame point -> the paper's 200x200 ROI around it.
+        x, y = display_to_frame((c["x"], c["y"]), (c["width"], c["height"]), (rows, cols))
+        expected = clip_window(round(x), round(y), ROI_SIZE, ROI_SIZE, (rows, cols))
+        assert roi == expected, f"{name}: clicked {c}, frame ({x:.1f}, {y:.1f}); readout {c['after']!r}"
+        # Independently of the conversion: the ROI is centred where the click is on the frame, within one
+        # CSS pixel (the browser reports whole pixels) and the slider's rounding, unless shifted at the border.
+        tol = max(cols / c["width"], rows / c["height"]) + 1.0
+        centre = (roi[0] + (ROI_SIZE - 1) / 2, roi[1] + (ROI_SIZE - 1) / 2)
+        for axis, f, n in ((0, fraction[0], cols), (1, fraction[1], rows)):
+            target = f * n - 0.5
+            inside = ROI_SIZE / 2 <= target <= n - ROI_SIZE / 2
+            if inside:
+                assert abs(centre[axis] - target) <= tol, (name, axis, centre, target, tol)
+            else:
+                assert roi[axis] in (0, n - ROI_SIZE), (name, axis, roi)
+    scaled = {name: c for name, _, c in results}["css-scaled"]
+    assert scaled["width"] == pytest.approx(264, abs=1), f"the overview was not shrunk by CSS: {scaled}"
+    assert _roi_in(results[-1][2]["after"]) == (cols - ROI_SIZE, rows - ROI_SIZE, ROI_SIZE, ROI_SIZE)
