@@ -1,9 +1,10 @@
 """Live widgets for the workbench: thin ipywidgets shells over plain semlab functions.
 
-* :class:`TemplateExplorer` -- pick the ROI (a mouse click on an overview of the frame, click sliders and a
-  size, or motion differencing), tune the contour-template identification (Gaussian σ, Otsu or manual threshold, morphology) and the Canny edge
-  detector (adaptive, eq. 10, or manual T_l/T_h); shows the ROI, the binary image with the contour and the
-  edge map live (the paper's Figs. 1-3). ``explorer.params`` goes straight into :func:`semlab.track`.
+* :class:`TemplateExplorer` -- pick the ROI (a mouse click on an overview of the frame, or click sliders,
+  and a size; or motion differencing), tune the contour-template identification (Gaussian σ, Otsu or manual
+  threshold, morphology) and the Canny edge detector (adaptive, eq. 10, or manual T_l/T_h); shows the ROI,
+  the binary image with the contour and the edge map live (the paper's Figs. 1-3). ``explorer.params`` goes
+  straight into :func:`semlab.track`.
 * :class:`TrackingPlayer` -- a frame slider and a Play button over a tracked sequence, with the contour
   template drawn where the tracker put it and the track so far (the paper's Fig. 7).
 * :class:`ServoPanel` -- step size, feed-forward on/off, PID gains and a Run button for
@@ -179,7 +180,7 @@ def display_to_frame(display_xy, display_size, frame_shape) -> tuple[float, floa
 
     Examples
     --------
-    A 640x480 frame shown 320 px wide: CSS px 10 covers frame x 20..21, so its centre is 20.5.
+    A 640x480 frame shown 320x240 px: CSS pixel (10, 0) covers frame pixels x 20 and 21, y 0 and 1.
 
     >>> display_to_frame((10, 0), (320, 240), (480, 640))
     (20.5, 0.5)
