@@ -63,6 +63,7 @@ _EXPORTS = {
     "TemplateExplorer": "semlab.widgets",
     "TrackingPlayer": "semlab.widgets",
     "ServoPanel": "semlab.widgets",
+    "display_to_frame": "semlab.widgets",
     # protocols
     "Microscope": "semlab.protocols",
     "Axis": "semlab.protocols",
