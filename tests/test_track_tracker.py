@@ -366,3 +366,50 @@ def test_run_tracker_counts_a_refused_start_as_lost_frames():
     df, ms = run_tracker(Tracker(), frames, (10, 10, 80, 80))
     assert len(df) == 4 and not df.ok.any() and df.x.isna().all()
     assert "init_error" in df.attrs and np.isnan(ms)
+
+
+# --------------------------------------------------------------------------- band width
+def _textured(texture_sd, noise_sd=8.0, seed=0):
+    """The wedge over a substrate of smooth texture (correlation ~4 px) plus white noise."""
+    import cv2
+
+    rng = np.random.default_rng(seed)
+    field = cv2.GaussianBlur(rng.standard_normal(SHAPE).astype(np.float32), (0, 0), 4.0)
+    field *= texture_sd / field.std()
+    yy, xx = np.mgrid[: SHAPE[0], : SHAPE[1]]
+    vx, vy = xx - TIP[0], yy - TIP[1]
+    a = np.radians(14.0)
+    d = np.where((vx * np.sin(a) + vy * np.cos(a) > 0) & (vx * np.sin(a) - vy * np.cos(a) > 0), np.hypot(vx, vy),
+                 np.maximum(vx * np.sin(a) + vy * np.cos(a), vx * np.sin(a) - vy * np.cos(a)))
+    cover = ndtr(-d / 1.0)
+    return ((60.0 + field) * (1 - cover) + 190.0 * cover + noise_sd * rng.standard_normal(SHAPE)).astype(np.float32)
+
+
+@pytest.mark.parametrize("ratio", [0.0, 0.8, 1.5])
+def test_background_texture_is_measured_against_the_noise(ratio):
+    # The substrate's texture (smooth: the noise estimate from row differences barely sees it)
+    # over the white noise's standard deviation; ~2,000 background pixels: a few % sampling
+    # error on the variances, and the noise model's estimate is a few % low.
+    t = Tracker()
+    t.init(_textured(ratio * 8.0), ROI)
+    assert t.texture == pytest.approx(ratio, abs=0.3)
+
+
+def test_band_reaches_less_far_into_a_textured_background():
+    flat, textured = Tracker(), Tracker()
+    flat.init(_textured(0.0), ROI)
+    textured.init(_textured(8.0), ROI)
+    assert flat.band_widths() == (3, 3) and textured.band_widths() == (2, 3)
+    # One px fewer on the background side: fewer band pixels, the object's side alike.
+    assert textured.band.sum() < flat.band.sum()
+    inside = textured.contour.region & flat.contour.region
+    assert (textured.band & inside).sum() == pytest.approx((flat.band & inside).sum(), rel=0.05)
+    # An explicit band_px is used on both sides; inner_px deepens the object's side; the
+    # paper's methods keep 3 px.
+    explicit = Tracker(band_px=3)
+    explicit.init(_textured(8.0), ROI)
+    assert explicit.band_widths() == (3, 3)
+    assert Tracker(band_px=2, inner_px=4).band_widths() == (2, 4)
+    contour = Tracker("contour")
+    contour.init(_textured(8.0), ROI)
+    assert contour.band_widths() == (3, 3)
