@@ -87,25 +87,26 @@ def test_fluctuation_and_clutter_moving_probe_followed(kind):
     assert s["loss_rate"] == 0
 
 
+@pytest.mark.parametrize("seed", [0, 2])
 @pytest.mark.parametrize("kind", ["gray_fluctuation", "clutter_occluder"])
-def test_fluctuation_and_clutter_moving_probe_near_the_bound(kind):
-    # Seed 0, the benchmark's (issue 3's target: RMSE <= 2x the one-frame bound). Theory: the
-    # displacement carries frame 0's error as well as frame k's (sqrt(2) x the bound for an
-    # efficient estimator; along the sweep the moved ROI's bound is up to 13 % above frame 0's),
-    # so 2x leaves ~25 % for the static background's pull (measured 1.74x and 1.89x).
-    s = _moving_stats(kind, seed=0)
+def test_fluctuation_and_clutter_moving_probe_near_the_bound(kind, seed):
+    # Issue 3's target: RMSE <= 2x the one-frame bound. Theory: the displacement carries frame
+    # 0's error as well as frame k's (sqrt(2) x the bound for an efficient estimator; along the
+    # sweep the moved ROI's bound is up to 13 % above frame 0's), so 2x leaves ~25 % for the
+    # static background's pull (measured, 50 frames: seed 0 1.88x / 1.92x, seed 2 1.93x / 1.82x).
+    s = _moving_stats(kind, seed=seed)
     assert s["loss_rate"] == 0
     assert s["rmse"] <= 2.0 * s["crb"]
 
 
 @pytest.mark.xfail(strict=True, reason=(
-    "known limitation, measured (seed 2, 50 frames): RMSE 2.36x the one-frame bound on gray_fluctuation "
-    "and 2.03x on clutter_occluder with the probe moving (seeds 0-5: 1.7-9.2x; seeds 1 and 3, a particle "
-    "at the apex or a thin probe, are the worst). Beyond frame 0's own error (sqrt(2) x the bound), the "
-    "static background beside the object pulls the estimate back while the probe is within a few px of "
-    "where the template was taken. A matter for semlab/tracking.py."))
-def test_fluctuation_and_clutter_moving_probe_near_the_bound_other_seed():
-    assert all(_moving_stats(kind)["rmse"] <= 2.0 * _moving_stats(kind)["crb"]
+    "known limitation, measured (seed 1, 50 frames): RMSE 3.85x the one-frame bound on gray_fluctuation "
+    "and 3.07x on clutter_occluder with the probe moving (seeds 0-5: 1.4-8.6x; seeds 0, 2, 4 within 2x; "
+    "seed 1 has a particle touching the apex, seed 3 a thin probe nearly parallel to x). The static "
+    "background beside the object pulls the estimate back while the probe is within a few px of where the "
+    "template was taken. A matter for semlab/tracking.py."))
+def test_fluctuation_and_clutter_moving_probe_near_the_bound_particle_at_the_apex():
+    assert all(_moving_stats(kind, seed=1)["rmse"] <= 2.0 * _moving_stats(kind, seed=1)["crb"]
                for kind in ("gray_fluctuation", "clutter_occluder"))
 
 

@@ -413,3 +413,23 @@ def test_band_reaches_less_far_into_a_textured_background():
     contour = Tracker("contour")
     contour.init(_textured(8.0), ROI)
     assert contour.band_widths() == (3, 3)
+
+
+def test_jacobian_denoising_only_on_a_textured_background():
+    # Non-local means on the template before its gradients (jacobian_denoise) where the band is
+    # bias-limited (textured background); a flat background's Jacobian is left as it was. (What
+    # it buys is measured on the simulator: benchmarks/bench_tracking.py and issue 3's notes.)
+    def jacobian(frame, strength):
+        t = Tracker(jacobian_denoise=strength)
+        t.init(frame, ROI)
+        return np.stack([t._gx, t._gy])
+
+    textured, flat = _textured(8.0, noise_sd=8.0), _textured(0.0, noise_sd=8.0)
+    on, off = jacobian(textured, 0.8), jacobian(textured, None)
+    assert on.shape == off.shape and not np.allclose(on, off)
+    # Denoising takes the noise out, not the edges: the Jacobian's strongest values barely move.
+    strong = np.hypot(*off) > np.percentile(np.hypot(*off), 90)
+    assert np.median(np.abs(np.hypot(*on)[strong] / np.hypot(*off)[strong] - 1)) < 0.1
+    np.testing.assert_array_equal(jacobian(flat, 0.8), jacobian(flat, None))
+    with pytest.raises(ValueError, match="jacobian_denoise"):
+        Tracker(jacobian_denoise=-1.0)
