@@ -433,3 +433,21 @@ def test_jacobian_denoising_only_on_a_textured_background():
     np.testing.assert_array_equal(jacobian(flat, 0.8), jacobian(flat, None))
     with pytest.raises(ValueError, match="jacobian_denoise"):
         Tracker(jacobian_denoise=-1.0)
+
+
+def test_reidentified_contour_has_lost_frame_0s_noise():
+    # reidentify=True: after template_frames frames the contour template is identified again on
+    # the averaged template (at frame 0's threshold): frame 0's noise moved pixels of its contour,
+    # hence of the band, off those of the noise-free wedge; the average's band is nearer to it
+    # (10 frames: the template's noise 1/sqrt(10) of a frame's).
+    clean = Tracker()
+    clean.init(frames_for([(0.0, 0.0)])[0], ROI)
+    before, after = [], []
+    for seed in range(4):
+        frames = frames_for([(0.1 * k, 0.0) for k in range(12)], noise=25.0, seed=seed)
+        t = Tracker(reidentify=True, template_frames=10)
+        t.init(frames[0], ROI)
+        before.append((t.band ^ clean.band).sum())
+        assert all(t.update(f).ok for f in frames[1:]) and t._stack is None  # rebuilt
+        after.append((t.band ^ clean.band).sum())
+    assert all(a <= b for a, b in zip(after, before)) and sum(after) <= 0.6 * sum(before)
