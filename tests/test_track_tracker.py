@@ -415,22 +415,26 @@ def test_band_reaches_less_far_into_a_textured_background():
     assert contour.band_widths() == (3, 3)
 
 
-def test_jacobian_denoising_only_on_a_textured_background():
-    # Non-local means on the template before its gradients (jacobian_denoise) where the band is
-    # bias-limited (textured background); a flat background's Jacobian is left as it was. (What
-    # it buys is measured on the simulator: benchmarks/bench_tracking.py and issue 3's notes.)
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_jacobian_denoising_brings_the_gradients_closer_to_the_noise_free_ones(seed):
+    # Non-local means on the template before its gradients (jacobian_denoise): the Jacobian of
+    # one noisy frame comes closer to that of the same scene without noise (flat background, so
+    # both are whitened alike; measured: rms error 3.6-4.0 -> 1.8-2.2 gradient units).
     def jacobian(frame, strength):
         t = Tracker(jacobian_denoise=strength)
         t.init(frame, ROI)
-        return np.stack([t._gx, t._gy])
+        return {(int(x), int(y)): (gx, gy) for (x, y), gx, gy in zip(t._points, t._gx, t._gy)}
 
-    textured, flat = _textured(8.0, noise_sd=8.0), _textured(0.0, noise_sd=8.0)
-    on, off = jacobian(textured, 0.8), jacobian(textured, None)
-    assert on.shape == off.shape and not np.allclose(on, off)
-    # Denoising takes the noise out, not the edges: the Jacobian's strongest values barely move.
-    strong = np.hypot(*off) > np.percentile(np.hypot(*off), 90)
-    assert np.median(np.abs(np.hypot(*on)[strong] / np.hypot(*off)[strong] - 1)) < 0.1
-    np.testing.assert_array_equal(jacobian(flat, 0.8), jacobian(flat, None))
+    truth = jacobian(_textured(0.0, noise_sd=0.0), None)
+    noisy = _textured(0.0, noise_sd=8.0, seed=seed)
+    on, off = jacobian(noisy, 0.8), jacobian(noisy, None)
+    common = sorted(set(truth) & set(on) & set(off))
+    assert len(common) > 0.9 * len(truth)
+
+    def rms_error(jac):
+        return np.sqrt(np.mean([(jac[p][0] - truth[p][0]) ** 2 + (jac[p][1] - truth[p][1]) ** 2 for p in common]))
+
+    assert rms_error(on) < 0.7 * rms_error(off)
     with pytest.raises(ValueError, match="jacobian_denoise"):
         Tracker(jacobian_denoise=-1.0)
 
