@@ -203,17 +203,20 @@ class Tracker:
         ``jacobian_denoise=None``: median RMSE / bound 1.92 -> 1.68 (200-px moves), 2.79 -> 2.48
         (low dose), 2.42 -> 1.83 (gray-level fluctuation), 2.18 -> 2.00 (clutter), lower on
         14-17 of the 18 seeds of each; a still probe's spread 1.29 -> 1.26; worst low-dose loss
-        rate 46 % -> 15 %. (5×5 patches did worse: at low dose they doubled the error on 2 of 6
-        seeds; 3×3 worse everywhere.)
+        rate 46 % -> 15 %. The price: a still probe at low dose, 2.28 -> 2.67 (median of 12
+        seeds) — the substrate's texture that it smooths away moves with the image drift, so
+        for a still probe it carries information. (5×5 patches did worse: at low dose they
+        doubled the error on 2 of 6 seeds; 3×3 worse everywhere; a weaker filter, 0.4-0.6, does
+        not spare the still probe.)
     reidentify : bool
         ``"ic"``: once the template is averaged (``template_frames``), identify the contour
         template again on the averaged template, at frame 0's threshold, take the band from it
         and register the stored frames, frame 0 included, once more (:meth:`_reidentify`).
         Off by default: on the simulator's moving sequences, seeds 0-17, it lowers the geometric
-        mean of RMSE / bound by 4-9 % and the worst scenes' by up to 30 % (frame 0's contour
-        poor: a particle at the apex, a thin probe), but raises the median by 1-3 % (clutter:
-        the median 2.02 -> 2.08) and, next to a static particle beside a thin shaft, leaves a
-        0.17-px bias that frame 0's band does not.
+        mean of RMSE / bound by 1-9 % and the worst scenes' by up to 30 % (frame 0's contour
+        poor: a particle at the apex, a thin probe), but raises the median by up to 8 % (low
+        dose 2.48 -> 2.68, clutter 2.00 -> 2.11) and, next to a static particle beside a thin
+        shaft, leaves a 0.17-px bias that frame 0's band does not.
 
     Examples
     --------
