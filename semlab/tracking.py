@@ -290,6 +290,8 @@ class Tracker:
             raise ValueError(f"jacobian_denoise must be >= 0 or None, got {jacobian_denoise!r}")
         self.jacobian_denoise = jacobian_denoise
         self.reidentify = bool(reidentify)
+        #: The background's texture over the noise (standard deviations), measured by init().
+        self.texture = None
         default_min = {"ic": 0.1, "contour": 0.3, "ssd": 0.3, "hb": 0.3}[method]
         self.min_score = default_min if min_score is None else float(min_score)
         self.min_relative_score = float(min_relative_score)
@@ -331,7 +333,6 @@ class Tracker:
             if contrast < 2.0 * sigma:
                 raise ValueError(f"no object in the ROI {roi}: the contour encloses a contrast of {contrast:.3g} "
                                  f"gray levels, less than twice the noise ({sigma:.3g}); this is noise, not a probe")
-        #: The background's texture over the noise (standard deviations; :meth:`background_texture`).
         self.texture = self.background_texture(patch, region, self.noise)
         outside, inside = self.band_widths()
         band = self._band(contour.mask, outside)
@@ -404,6 +405,8 @@ class Tracker:
         if self.band_px is not None or self.method != "ic":
             width = DEFAULT_BAND_PX if self.band_px is None else self.band_px
             return width, max(width, self.inner_px if self.method == "ic" else 0)
+        if self.texture is None:
+            raise RuntimeError("band_widths() with band_px=None needs init(): the background's texture is measured there")
         outside = 2 if self.texture >= NARROW_BAND_TEXTURE else DEFAULT_BAND_PX
         return outside, max(DEFAULT_BAND_PX, self.inner_px)
 
@@ -1007,8 +1010,8 @@ class Tracker:
         Frame 0's contour follows frame 0's noise: the band built around it holds the pixels
         that noise pushed over the threshold, so frame 0's residuals on it are not centred and
         its own registration — the origin of every displacement — is pulled (measured on the
-        simulator's gray-level sequence, seeds 0-5: frame 0 registered 0.03-0.30 px off its
-        noise-free render, mean 0.11 px; 0.00-0.11 px, mean 0.06 px, with this). The averaged
+        simulator's gray-level sequence, seeds 0-5, in x: frame 0 registered 0.03-0.27 px off
+        its noise-free render, mean 0.12 px; -0.02-0.11 px, mean 0.05 px, with this). The averaged
         template's contour, at frame 0's threshold (the user's choice, or Otsu's of frame 0), has
         lost that noise. Kept as it was when no usable contour comes out.
         """

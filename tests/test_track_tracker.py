@@ -455,3 +455,8 @@ def test_reidentified_contour_has_lost_frame_0s_noise():
         assert all(t.update(f).ok for f in frames[1:]) and t._stack is None  # rebuilt
         after.append((t.band ^ clean.band).sum())
     assert all(a <= b for a, b in zip(after, before)) and sum(after) <= 0.6 * sum(before)
+
+
+def test_band_widths_need_the_texture_from_init():
+    with pytest.raises(RuntimeError, match="init"):
+        Tracker().band_widths()
