@@ -78,6 +78,10 @@ DEFAULT_BAND_PX = 3
 #: more noise); a flat background with white noise 0.00-0.25 (the noise model's estimate is a
 #: few % low).
 NARROW_BAND_TEXTURE = 0.4
+#: Fewest band pixels a template may have: translation, gain, offset and the background tiles'
+#: levels are fitted to them (on a synthetic tip, a 16x16 ROI leaves 16 and was read 3.5 px off
+#: with a normal score; an 18x18 one leaves 36 and is sometimes lost, but flagged; 20x20, 63: fine).
+MIN_BAND_PIXELS = 30
 #: Step (px) below which each smoothed level of the "ic" first stage stops (widest first).
 STAGE1_TOLERANCE = (0.1, 0.05, 0.02)
 
@@ -340,9 +344,9 @@ class Tracker:
             # The object's inside moves with it: a deeper band on that side pins its gray level
             # (the photometric nuisance) without taking in background that stays behind.
             band |= self._band(contour.mask, inside) & contour.region
-        if band.sum() < 10:
-            raise ValueError(f"the contour template in ROI {roi} leaves fewer than 10 pixels away from the "
-                             "ROI border: enlarge the ROI or move it onto the tip")
+        if band.sum() < MIN_BAND_PIXELS:
+            raise ValueError(f"the contour template in ROI {roi} leaves {int(band.sum())} band pixels away from "
+                             f"the ROI border, fewer than {MIN_BAND_PIXELS}: enlarge the ROI or move it onto the tip")
         self.roi = roi
         self.contour: ContourTemplate = contour
         self.band = band
@@ -1026,7 +1030,7 @@ class Tracker:
         band = self._band(contour.mask, outside)
         if inside > outside:
             band |= self._band(contour.mask, inside) & contour.region
-        if band.sum() < 10 or not (contour.region.any() and not contour.region.all()):
+        if band.sum() < MIN_BAND_PIXELS or not (contour.region.any() and not contour.region.all()):
             return
         self.contour, self.band = contour, band
         inner = self._inner(contour.mask.shape, 2)

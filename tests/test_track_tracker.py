@@ -140,6 +140,7 @@ def test_noisy_repeatability_close_to_the_bound():
     (wedge(), (220, 60, 80, 80), ValueError, "not wholly inside"),
     (wedge(), (1000, 1000, 80, 80), ValueError, "not wholly inside"),
     (wedge(), (140, 95, 10, 10), ValueError, "too small"),
+    (wedge(), (138, 92, 16, 16), ValueError, "fewer than 30"),  # big enough, but a band of 16 px
     (wedge(), (100, 60, 80), ValueError, "four numbers"),
 ])
 def test_bad_input_at_init(frame, roi, error, msg):
