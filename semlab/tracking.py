@@ -78,6 +78,8 @@ DEFAULT_BAND_PX = 3
 #: more noise); a flat background with white noise 0.00-0.25 (the noise model's estimate is a
 #: few % low).
 NARROW_BAND_TEXTURE = 0.4
+#: The "ic" Jacobian is denoised (``jacobian_denoise``) once the template averages this many frames.
+DENOISE_FROM_FRAMES = 4
 #: Fewest band pixels a template may have: translation, gain, offset and the background tiles'
 #: levels are fitted to them (on a synthetic tip, a 16x16 ROI leaves 16 and was read 3.5 px off
 #: with a normal score; an 18x18 one leaves 36 and is sometimes lost, but flagged; 20x20, 63: fine).
@@ -199,19 +201,18 @@ class Tracker:
         its own gray level in the full-resolution fit (the substrate where the object moved to
         is brighter or darker at that scale); 0: one background level.
     jacobian_denoise : float or None
-        ``"ic"``: the template's gradients (the Jacobian, eq. 5's ``M₀``) are taken after
-        non-local-means denoising (scikit-image ``denoise_nl_means``, 7×7 patches, 13×13 search,
-        filter strength this many times the template's noise standard deviation, which shrinks
-        as the template is averaged). None or 0: off. The template's noise enters every
-        estimate through its gradients. Measured on the simulator, seeds 0-17, against
-        ``jacobian_denoise=None``: median RMSE / bound 1.92 -> 1.68 (200-px moves), 2.79 -> 2.48
-        (low dose), 2.42 -> 1.83 (gray-level fluctuation), 2.18 -> 2.00 (clutter), lower on
-        14-17 of the 18 seeds of each; a still probe's spread 1.29 -> 1.26; worst low-dose loss
-        rate 46 % -> 15 %. The price: a still probe at low dose, 2.28 -> 2.67 (median of 12
-        seeds) — the substrate's texture that it smooths away moves with the image drift, so
-        for a still probe it carries information. (5×5 patches did worse: at low dose they
-        doubled the error on 2 of 6 seeds; 3×3 worse everywhere; a weaker filter, 0.4-0.6, does
-        not spare the still probe.)
+        ``"ic"``: once the template averages :data:`DENOISE_FROM_FRAMES` frames, its gradients
+        (the Jacobian, eq. 5's ``M₀``) are taken after non-local-means denoising (scikit-image
+        ``denoise_nl_means``, 7×7 patches, 13×13 search, filter strength this many times the
+        template's noise standard deviation, which shrinks as the template is averaged). None
+        or 0: off. The template's noise enters every estimate through its gradients. Measured
+        on the simulator, seeds 0-17, against ``jacobian_denoise=None``: median RMSE / bound
+        1.92 -> 1.70 (200-px moves), 2.79 -> 2.43 (low dose), 2.42 -> 1.88 (gray-level
+        fluctuation), 2.18 -> 1.97 (clutter); a still probe's spread 1.29 -> 1.28; worst
+        low-dose loss rate 46 % -> 9 %; a still probe at low dose 2.28 -> 2.32 (12 seeds).
+        Denoising from the first template on did 1-3 % better on the standard-dose moving
+        sequences but 2.28 -> 2.67 on the still probe at low dose; 5×5 patches doubled the
+        low-dose error on 2 of 6 seeds; 3×3 were worse everywhere.
     reidentify : bool
         ``"ic"``: once the template is averaged (``template_frames``), identify the contour
         template again on the averaged template, at frame 0's threshold, take the band from it
@@ -493,9 +494,11 @@ class Tracker:
                                     self.jacobian_sigma_first))
             self._sigma_j = sigma_j
             tj = tw
-            if self.jacobian_denoise:
+            if self.jacobian_denoise and self._n_averaged >= DENOISE_FROM_FRAMES:
                 # The Jacobian from the template denoised by non-local means: its noise (and
                 # the averaged template's leftover) enters every estimate through the gradients.
+                # (Not on the first templates: averaged over fewer frames, at low dose they are
+                # too noisy for the patches' similarity to mean anything.)
                 noise_sd = float(np.sqrt((1.0 - rho ** 2) * np.mean(self.noise.variance(self._t_values))
                                          / self._n_averaged))
                 tj = denoise_nl_means(tw.astype(np.float64), h=self.jacobian_denoise * noise_sd, sigma=noise_sd,
