@@ -220,7 +220,7 @@ class Tracker:
         Off by default: on the simulator's moving sequences, seeds 0-17, it lowers the geometric
         mean of RMSE / bound by 1-9 % and the worst scenes' by up to 30 % (frame 0's contour
         poor: a particle at the apex, a thin probe), but raises the median by up to 8 % (low
-        dose 2.48 -> 2.68, clutter 2.00 -> 2.11) and, next to a static particle beside a thin
+        dose 2.43 -> 2.58, clutter 1.97 -> 2.13) and, next to a static particle beside a thin
         shaft, leaves a 0.17-px bias that frame 0's band does not.
 
     Examples
