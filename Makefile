@@ -41,6 +41,7 @@ test-fast: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_sim.py
 	$(BIN)/python benchmarks/bench_tracking.py
+	$(BIN)/python benchmarks/bench_tracking_seeds.py
 	$(BIN)/python benchmarks/bench_servo.py
 
 strip: $(STAMP)
