@@ -339,22 +339,14 @@ class Tracker:
                 raise ValueError(f"no object in the ROI {roi}: the contour encloses a contrast of {contrast:.3g} "
                                  f"gray levels, less than twice the noise ({sigma:.3g}); this is noise, not a probe")
         self.texture = self.background_texture(patch, region, self.noise)
-        outside, inside = self.band_widths()
-        band = self._band(contour.mask, outside)
-        if inside > outside:
-            # The object's inside moves with it: a deeper band on that side pins its gray level
-            # (the photometric nuisance) without taking in background that stays behind.
-            band |= self._band(contour.mask, inside) & contour.region
+        band = self._registration_band(contour)
         if band.sum() < MIN_BAND_PIXELS:
             raise ValueError(f"the contour template in ROI {roi} leaves {int(band.sum())} band pixels away from "
                              f"the ROI border, fewer than {MIN_BAND_PIXELS}: enlarge the ROI or move it onto the tip")
         self.roi = roi
         self.contour: ContourTemplate = contour
         self.band = band
-        inner = self._inner(contour.mask.shape, 2)
-        self._contour_core = contour.mask & inner
-        if self._contour_core.sum() < 5:
-            self._contour_core = contour.mask
+        self._contour_core = self._core(contour)
         if not (self.whiten or self.noise_weights):
             self.noise = NoiseModel()
         self.template = patch
@@ -417,6 +409,22 @@ class Tracker:
             raise RuntimeError("band_widths() with band_px=None needs init(): the background's texture is measured there")
         outside = 2 if self.texture >= NARROW_BAND_TEXTURE else DEFAULT_BAND_PX
         return outside, max(DEFAULT_BAND_PX, self.inner_px)
+
+    def _registration_band(self, contour: ContourTemplate) -> np.ndarray:
+        """The band of :meth:`band_widths` around ``contour``, away from the ROI border."""
+        outside, inside = self.band_widths()
+        band = self._band(contour.mask, outside)
+        if inside > outside:
+            # The object's inside moves with it: a deeper band on that side pins its gray level
+            # (the photometric nuisance) without taking in background that stays behind.
+            band |= self._band(contour.mask, inside) & contour.region
+        return band
+
+    @classmethod
+    def _core(cls, contour: ContourTemplate) -> np.ndarray:
+        """The contour's pixels 2 px inside the ROI ("contour" matching), or all if fewer than 5."""
+        core = contour.mask & cls._inner(contour.mask.shape, 2)
+        return core if core.sum() >= 5 else contour.mask
 
     @staticmethod
     def background_texture(patch, region, noise: NoiseModel, min_distance: float = 4.0) -> float:
@@ -1032,15 +1040,11 @@ class Tracker:
             contour = identify_contour_template(template8, **params)
         except ValueError:
             return
-        outside, inside = self.band_widths()
-        band = self._band(contour.mask, outside)
-        if inside > outside:
-            band |= self._band(contour.mask, inside) & contour.region
+        band = self._registration_band(contour)
         if band.sum() < MIN_BAND_PIXELS or not (contour.region.any() and not contour.region.all()):
             return
         self.contour, self.band = contour, band
-        inner = self._inner(contour.mask.shape, 2)
-        self._contour_core = contour.mask & inner if (contour.mask & inner).sum() >= 5 else contour.mask
+        self._contour_core = self._core(contour)
         self._small_mask = None  # the coarse search's mask follows the new region
 
     def _consistency_weights(self, patches, shifts, cut):
