@@ -21,6 +21,12 @@ Both models share one interface: ``forward`` (commit voltages, return displaceme
 (peek), ``inverse`` (voltage that produces a desired displacement from the current memory state),
 ``reset``, ``state``, ``check_axis``, ``u_range`` and ``displacement_range``.
 
+The characterised range ``u_range`` limits what the model *knows*, not where the axis may go: beyond it
+the models extrapolate linearly (:attr:`HysteresisModel.extrapolation_slopes`, deliberately steeper than
+anything measured, so that a feed-forward move beyond the range stops short rather than overshoots) and
+keep their memory consistent (passing an end of the range wipes the memory out, as reaching it does).
+The axis limits are the servo's business (:mod:`semlab.control`).
+
 Displacements are in image pixels along the measured image direction of the axis; the sign is chosen
 so that rising voltage increases the displacement.
 """
@@ -29,7 +35,7 @@ from __future__ import annotations
 
 import copy
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pandas as pd
@@ -61,6 +67,13 @@ BRANCHES = ("ascending", "descending", "inner_ascending", "inner_descending")
 #: ascending branch (mirror of eq. 11), nests a second and third-order loop that closes again, then
 #: reverses on the descending branch (eq. 11 itself) and nests once more.
 DEFAULT_INNER_TURNS = (0.75, 0.25, 0.6, 0.4, 1.0, 0.3, 0.8, 0.5, 0.0)
+
+#: Beyond the characterised range the models extrapolate linearly with this many times the steepest
+#: slope of their major loop. A piezo's gain keeps growing with the voltage (the simulated Preisach
+#: axis characterised over 0-50 V of 0-100 V: 1.07x its steepest in-range slope 10 V beyond, 1.5x at
+#: 100 V), and a model that is too steep only makes the feed-forward stop short, which the feedback
+#: finishes, while one that is too shallow makes it overshoot.
+EXTRAPOLATION_SLOPE_FACTOR = 1.25
 
 
 # ---------------------------------------------------------------------------------------------
@@ -232,7 +245,11 @@ class HysteresisModel:
     direction : (float, float)
         Unit vector of the image direction in which rising voltage moves the probe.
     u_range : (float, float)
-        ``(U0, Un)`` of the characterisation; the model is valid only inside it.
+        ``(U0, Un)`` of the characterisation: what the model knows. Outside it the model extrapolates
+        linearly (:attr:`extrapolation_slopes`); a voltage is only refused when it is not finite.
+    extrapolation_slopes : (float, float)
+        px/V below ``U0`` and above ``Un``: :data:`EXTRAPOLATION_SLOPE_FACTOR` times the steepest slope
+        of the major loop.
     """
 
     kind = "base"
@@ -248,6 +265,8 @@ class HysteresisModel:
             raise ValueError(f"direction {direction!r} must be a non-zero 2-vector")
         self.direction = tuple(d / np.hypot(*d))
         self.meta = dict(meta or {})
+        steepest = self.steepest_slope()
+        self.extrapolation_slopes = (EXTRAPOLATION_SLOPE_FACTOR * steepest,) * 2
         self.state = None
         self.reset()
 
@@ -256,15 +275,18 @@ class HysteresisModel:
         raise NotImplementedError
 
     def _advance(self, state: HysteresisState, u: float) -> HysteresisState:  # pragma: no cover
+        """The state after a monotonic move to ``u``, both inside ``u_range``."""
         raise NotImplementedError
 
-    def inverse(self, target: float) -> float:  # pragma: no cover - abstract
+    def _inverse(self, state: HysteresisState, target: float) -> float:  # pragma: no cover - abstract
+        """Voltage in ``u_range`` whose monotonic move from ``state`` (inside the range) reaches
+        ``target``, which lies between the displacements at ``state.u`` and at the range's end."""
         raise NotImplementedError
 
     # -- shared behaviour -----------------------------------------------------------------------
     @property
     def displacement_range(self) -> tuple[float, float]:
-        """Displacements at U0 and Un (px): the range any target must lie in."""
+        """Displacements at U0 and Un (px): the range the characterisation covered."""
         return (self._major(self.u_range[0], True), self._major(self.u_range[1], True))
 
     @property
@@ -273,6 +295,13 @@ class HysteresisModel:
         lo, hi = self.displacement_range
         return (hi - lo) / (self.u_range[1] - self.u_range[0])
 
+    def steepest_slope(self, n: int = 201) -> float:
+        """The steepest slope (px/V) of the two major branches over the characterised range."""
+        grid = np.linspace(*self.u_range, int(n))
+        slopes = [np.max(np.diff([self._major(u, rising) for u in grid]) / np.diff(grid))
+                  for rising in (True, False)]
+        return float(max(max(slopes), self.gain))
+
     def reset(self, u: float | None = None, branch: str = "ascending") -> HysteresisState:
         """Forget all reversals and put the model on a major branch.
 
@@ -280,53 +309,108 @@ class HysteresisModel:
         ----------
         u : float, optional
             Voltage; default ``U0`` (the state after a descent to U0, as after a characterisation).
+            Outside the range the model sits on its extrapolation, with its memory wiped out.
         branch : {"ascending", "descending"}
             Major branch the actuator is on (how ``u`` was approached).
         """
         if branch not in ("ascending", "descending"):
             raise ValueError(f"branch must be 'ascending' or 'descending', got {branch!r}")
         u = self.u_range[0] if u is None else self._check_u(u)
-        self.state = self._major_state(u, branch == "ascending")
+        rising = branch == "ascending"
+        inside = self._major_state(self._clip(u), rising)
+        self.state = self._outside(inside, u, rising)
         return self.state
 
     def _major_state(self, u: float, rising: bool) -> HysteresisState:
         return HysteresisState(u=u, y=self._major(u, rising), rising=rising)
 
     def _check_u(self, u) -> float:
-        u = as_finite(u, "voltage")
-        lo, hi = self.u_range
-        tol = 1e-9 * (hi - lo)
-        if not lo - tol <= u <= hi + tol:
-            raise ValueError(f"voltage {u:.6g} V is outside the model's range [{lo:.6g}, {hi:.6g}] V")
-        return min(max(u, lo), hi)
+        return as_finite(u, "voltage")
 
-    def _check_target(self, target) -> float:
-        y = as_finite(target, "target displacement")
-        lo, hi = self.displacement_range
-        tol = 1e-9 * max(1.0, hi - lo)
-        if not lo - tol <= y <= hi + tol:
-            raise ValueError(
-                f"target displacement {y:.4g} px is outside the model's range [{lo:.4g}, {hi:.4g}] px "
-                f"(voltages {self.u_range[0]:.4g}..{self.u_range[1]:.4g} V)"
-            )
-        return min(max(y, lo), hi)
+    def _clip(self, u: float) -> float:
+        return min(max(u, self.u_range[0]), self.u_range[1])
+
+    def _extrapolated(self, u: float) -> float:
+        """Displacement added beyond the characterised range (0 inside it)."""
+        lo, hi = self.u_range
+        if u > hi:
+            return self.extrapolation_slopes[1] * (u - hi)
+        if u < lo:
+            return self.extrapolation_slopes[0] * (u - lo)
+        return 0.0
+
+    def _inside(self, state: HysteresisState) -> HysteresisState:
+        """The state of the characterised model at the range's end nearest to ``state``."""
+        if self.u_range[0] <= state.u <= self.u_range[1]:
+            return state
+        return replace(state, u=self._clip(state.u), y=state.y - self._extrapolated(state.u))
+
+    def _outside(self, inside: HysteresisState, u: float, rising: bool) -> HysteresisState:
+        if self.u_range[0] <= u <= self.u_range[1]:
+            return inside
+        return replace(inside, u=u, y=inside.y + self._extrapolated(u), rising=rising)
+
+    def _step(self, state: HysteresisState, u: float) -> HysteresisState:
+        """A monotonic move from ``state`` to any voltage ``u``: the characterised model over the part
+        inside the range, the extrapolation beyond it."""
+        rising = state.rising if u == state.u else u > state.u
+        inside = self._advance(self._inside(state), self._clip(u))
+        return self._outside(inside, u, rising)
 
     def forward(self, voltages) -> np.ndarray | float:
         """Commit voltage(s) in order and return the displacement(s) they produce (px).
 
         The memory (reversal points / play states) is updated, so a model used as the shadow of an
-        axis must see every command sent to that axis.
+        axis must see every command sent to that axis. Voltages outside ``u_range`` are extrapolated.
         """
         scalar = np.ndim(voltages) == 0
         out = []
         for u in np.atleast_1d(np.asarray(voltages, dtype=float)):
-            self.state = self._advance(self.state, self._check_u(u))
+            self.state = self._step(self.state, self._check_u(u))
             out.append(self.state.y)
         return out[0] if scalar else np.asarray(out)
 
     def displacement(self, u: float) -> float:
         """Displacement a move from the current state to ``u`` would produce, without committing it."""
-        return self._advance(copy.deepcopy(self.state), self._check_u(u)).y
+        return self._step(copy.deepcopy(self.state), self._check_u(u)).y
+
+    def inverse(self, target: float) -> float:
+        """Voltage that brings the displacement to ``target`` from the current state (not committed).
+
+        Inside the characterised range the model's own inverse (eq. 11 by Newton-Raphson, or the
+        analytic inverse PI operator); beyond it the linear extrapolation. Every finite target has an
+        answer: whether the axis can apply it is for the caller to check against the axis limits.
+
+        Raises
+        ------
+        ValueError
+            If the target is not finite.
+        """
+        y_t = as_finite(target, "target displacement")
+        st = self.state
+        lo_y, hi_y = self.displacement_range
+        tol = 1e-9 * max(1.0, hi_y - lo_y)  # rounding
+        if abs(y_t - st.y) <= tol:
+            return st.u
+        rising = y_t > st.y
+        lo, hi = self.u_range
+        inside = self._inside(st)
+        edge = hi if rising else lo
+        slope = self.extrapolation_slopes[1 if rising else 0]
+        beyond = st.u >= hi if rising else st.u <= lo
+        if beyond:  # further out along the extrapolation
+            return edge + (y_t - inside.y) / slope
+        entry = lo if rising else hi  # coming back from beyond the other end: the line first
+        if (st.u < lo and rising) or (st.u > hi and not rising):
+            y_entry = inside.y
+            if (y_t <= y_entry) if rising else (y_t >= y_entry):
+                return entry + (y_t - y_entry) / self.extrapolation_slopes[0 if rising else 1]
+        y_edge = self._advance(copy.deepcopy(inside), edge).y
+        if abs(y_t - y_edge) <= tol:
+            return edge
+        if (y_t >= y_edge) if rising else (y_t <= y_edge):
+            return edge + (y_t - y_edge) / slope
+        return self._inverse(inside, y_t)
 
     def predict(self, voltages, *, reset: bool | tuple = True) -> np.ndarray:
         """Displacements for a voltage sequence, on a copy of the model (the model is untouched).
@@ -556,21 +640,10 @@ class PolynomialHysteresis(HysteresisModel):
             y = self._eval(origin, end, u)
         return HysteresisState(u=u, y=float(y), rising=rising, reversals=stack)
 
-    def inverse(self, target: float) -> float:
-        """Voltage that brings the displacement to ``target`` from the current state (not committed).
-
-        The monotonic voltage path from the current state is followed curve by curve (closing inner
-        loops on the way) and the curve that contains the target is solved by Newton-Raphson.
-
-        Raises
-        ------
-        ValueError
-            If the target is NaN or outside :attr:`displacement_range`.
-        """
-        y_t = self._check_target(target)
-        st = self.state
-        if y_t == st.y:
-            return st.u
+    def _inverse(self, st, y_t: float) -> float:
+        """The voltage whose monotonic move from ``st`` reaches ``y_t``: the path is followed curve by
+        curve (closing inner loops on the way) and the curve that contains the target is solved by
+        Newton-Raphson (the paper's inverse)."""
         rising = y_t > st.y
         U0, Un = self.u_range
         stack = list(st.reversals)
@@ -688,17 +761,11 @@ class PIHysteresis(HysteresisModel):
             out[k] = z
         return out
 
-    def inverse(self, target: float) -> float:
+    def _inverse(self, state, target: float) -> float:
         """Analytic inverse: one step of the inverse PI operator from the states matching the
-        current forward states, then the inverse input shaping (not committed).
-
-        Raises
-        ------
-        ValueError
-            If the target is NaN or outside :attr:`displacement_range`.
-        """
-        y_t = self._check_target(target) - self.offset
-        z, w, W = self.state.plays, self.weights, self._W
+        forward states of ``state``, then the inverse input shaping."""
+        y_t = target - self.offset
+        z, w, W = state.plays, self.weights, self._W
         tail = np.concatenate([np.cumsum((w * z)[::-1])[::-1][1:], [0.0]])  # sum_{j>i} w_j z_j
         zi = W * z + tail
         ri = self.inv_thresholds

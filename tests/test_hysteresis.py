@@ -326,17 +326,60 @@ def test_unknown_kind_and_labels():
 
 
 @pytest.mark.parametrize("kind", ["polynomial", "pi"])
-def test_target_and_voltage_outside_model_range(kind):
+def test_beyond_the_characterised_range_the_model_extrapolates_linearly(kind):
     model = fit_hysteresis(synthetic_characterisation(), kind=kind)
-    lo, hi = model.displacement_range
-    with pytest.raises(ValueError, match="outside the model's range"):
-        model.inverse(hi + 0.1 * (hi - lo))
-    with pytest.raises(ValueError, match="outside the model's range"):
-        model.inverse(lo - 5.0)
+    s_lo, s_hi = model.extrapolation_slopes
+    # conservative: steeper than any slope of the characterised loop (a feed-forward beyond the range
+    # stops short of a truth that keeps its in-range slopes)
+    grid = np.linspace(U0, UN, 401)
+    for rising in (True, False):
+        ys = [model._major(u, rising) for u in grid]
+        assert s_lo >= np.max(np.diff(ys) / np.diff(grid)) and s_hi >= np.max(np.diff(ys) / np.diff(grid))
+    y_top = model.predict([UN], reset=True)[0]
+    np.testing.assert_allclose(model.predict([UN, UN + 10.0], reset=True), [y_top, y_top + 10.0 * s_hi])
+    y_low = model.predict([UN, U0 - 4.0], reset=True)[-1]
+    assert y_low == pytest.approx(model._major(U0, False) - 4.0 * s_lo)
+    # passing an end wipes the memory out, as reaching it does: back inside on the major branch
+    assert model.predict([40.0, 70.0, 30.0, UN + 5.0, 50.0])[-1] == pytest.approx(model._major(50.0, False))
     with pytest.raises(ValueError, match="finite|not a number"):
         model.inverse(float("nan"))
-    with pytest.raises(ValueError, match="outside the model's range"):
-        model.forward(UN + 1.0)
+    with pytest.raises(ValueError, match="finite|not a number"):
+        model.forward(float("inf"))
+
+
+wide_paths = st.lists(st.floats(U0 - 30.0, UN + 30.0, allow_nan=False), min_size=0, max_size=10)
+
+
+@settings(max_examples=60, deadline=None)
+@given(history=wide_paths, targets=st.lists(st.floats(-0.5, 1.5, allow_nan=False), min_size=1, max_size=6),
+       kind=st.sampled_from(["polynomial", "pi"]))
+def test_inverse_then_forward_is_identity_beyond_the_range_too(history, targets, kind):
+    model = poly_model() if kind == "polynomial" else PIHysteresis([90.0, 30.0, 20.0, 0.0, 10.0], -3.0, (U0, UN),
+                                                                   shape=0.3)
+    model.forward(history)
+    lo, hi = model.displacement_range
+    for f in targets:
+        t = lo + f * (hi - lo)
+        u = model.inverse(t)
+        assert model.forward(u) == pytest.approx(t, abs=1e-6 * (hi - lo))
+
+
+def test_feedforward_beyond_the_range_stops_short_of_an_independent_piezo():
+    # characterised over 0-60 V of the true piezo's 0-100 V: the inverse's command for a displacement
+    # the truth reaches at 75 V undershoots (the extrapolation is steeper than the truth), never over
+    plan = characterisation_voltages(0.0, 60.0, 30)
+    y = true_piezo(plan["u"].to_numpy())
+    char = plan.assign(displacement=y - y[0], ok=True)
+    char.attrs.update(axis="m0.x", direction=(1.0, 0.0), u_min=0.0, u_max=60.0)
+    for kind in ("polynomial", "pi"):
+        model = fit_hysteresis(char, kind=kind)
+        model.forward(30.0)
+        volts = [*plan["u"], 30.0]
+        start = true_piezo(volts)[-1] - y[0]
+        goal = true_piezo([*volts, 75.0])[-1] - y[0]
+        u = model.inverse(model.state.y + goal - start)
+        reached = true_piezo([*volts, u])[-1] - y[0]
+        assert 60.0 < u < 75.0 and start < reached <= goal
 
 
 def test_model_from_another_axis_is_refused():
