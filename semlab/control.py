@@ -14,9 +14,15 @@ Command law (all quantities in px along the axis' image direction, the measured 
   ``u = u_start + c / G``.
 
 ``c`` comes from :class:`PID` (derivative on a low-pass filtered measurement, anti-windup by
-back-calculation, output and slew limits). Safety rules: a frame where the tracker reports ``ok=False``
-holds the last safe command and is flagged; commands are clipped into the axis limits (and the model's
-range) before :meth:`Axis.apply`; NaN targets or measurements raise ValueError.
+back-calculation, output and slew limits). :class:`AxisLoop` holds that law for one axis; the 1-D
+:class:`VisualServo` and the 2-D :func:`semlab.pointing.move_probe_to` measure and feed it.
+
+Safety rules: a frame where the tracker reports ``ok=False`` holds the last safe command and is flagged;
+commands are clipped into the axis limits before :meth:`Axis.apply` (rows where that happened are
+flagged ``at_limit``); a move is refused, before anything moves, only when the axis limits cannot reach
+it (:func:`axis_reach`); NaN targets or measurements raise ValueError. The model's characterised range
+is not a limit: beyond it the feed-forward uses the model's conservative extrapolation and the feedback
+finishes.
 """
 
 from __future__ import annotations
@@ -27,11 +33,14 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from semlab.hysteresis import axis_identity
 from semlab.protocols import check_command
 
 __all__ = [
     "PID",
+    "AxisLoop",
     "VisualServo",
+    "axis_reach",
     "drive_voltages",
     "move_to",
     "step_metrics",
@@ -235,9 +244,244 @@ class PID:
         self.output = applied
 
 
+#: A move is refused only when the axis limits cannot reach it even if the model underestimates the
+#: axis by this fraction of the move to the limit (the models' open-loop errors are a few %, up to 6 %
+#: on a piezo outside their family: ``benchmarks/bench_servo.py``)...
+REACH_TOLERANCE = 0.1
+#: ... and beyond the characterised range the axis is this many times steeper than the model's
+#: extrapolation (the simulated Preisach axis reaches 1.2x it at its limit, 1.5x its in-range slope).
+REACH_SLOPE_FACTOR = 2.0
+
+
+def axis_reach(model, limits, *, generous: bool = False) -> tuple[float, float]:
+    """Model displacements (px, model coordinates) at the two axis limits from the model's state.
+
+    Parameters
+    ----------
+    model : HysteresisModel
+        The shadow of the axis (its state is the axis' state).
+    limits : (float, float)
+        The axis limits (V).
+    generous : bool
+        False: the model's prediction (extrapolated beyond its characterised range). True: what the axis
+        could reach if the model underestimated it (:data:`REACH_TOLERANCE`, :data:`REACH_SLOPE_FACTOR`):
+        a move beyond that is refused, anything short of it is tried.
+    """
+    y_now, u_now = model.state.y, model.state.u
+    u0, un = model.u_range
+    s_lo, s_hi = model.extrapolation_slopes
+    out = []
+    for lim in (float(limits[0]), float(limits[1])):
+        y_lim = model.displacement(lim)
+        if generous:
+            if lim > u_now:
+                beyond = s_hi * max(0.0, lim - max(u_now, un))
+            else:
+                beyond = -s_lo * max(0.0, min(u_now, u0) - lim)
+            y_lim = y_now + (1.0 + REACH_TOLERANCE) * (y_lim - y_now) + (REACH_SLOPE_FACTOR - 1.0) * beyond
+        out.append(y_lim)
+    return out[0], out[1]
+
+
+class AxisLoop:
+    """The control law of one axis (paper, Fig. 8a): feed-forward through the hysteresis model's inverse,
+    a PID on the measured displacement along the axis' image direction, and the axis' safety limits.
+
+    Used by :class:`VisualServo` (one axis, displacement projected on its direction) and by
+    :func:`semlab.pointing.move_probe_to` (several axes, displacements from the image Jacobian). The
+    caller measures; the loop computes and applies one command per frame.
+
+    Parameters
+    ----------
+    axis : Axis
+        Its ``limits`` bound every command (the model's characterised range does not).
+    model : HysteresisModel
+        Fitted on this axis; the shadow of the axis: its state must be the axis' current command and
+        history (as after :func:`~semlab.hysteresis.fit_hysteresis` or a previous servo run). Every
+        command is committed to it (the DAC-quantised one when the axis reports ``command``), so its
+        reversal memory follows the axis across calls.
+    frame_period : float
+        s per frame (creep compensation).
+    feedforward, pid, creep, ki_fine, fine_band_px, ff_margin, max_slew_v, max_step_px
+        See :class:`VisualServo`.
+    """
+
+    def __init__(self, axis, model, *, frame_period: float, feedforward: bool = True, pid=None, creep=None,
+                 ki_fine: float | None = 0.25, fine_band_px: float = 0.5, ff_margin: float = 0.025,
+                 max_slew_v: float | None = None, max_step_px: float | None = None):
+        if model is None:
+            raise ValueError("a hysteresis model is required (it supplies at least direction and gain)")
+        model.check_axis(axis)
+        self.axis, self.model = axis, model
+        self.dt = float(frame_period)
+        self.feedforward = bool(feedforward)
+        self.pid = pid if pid is not None else (PID(ki=0.8) if feedforward else PID(ki=0.45))
+        self._ki_coarse = self.pid.ki
+        if ki_fine is not None and not (math.isfinite(ki_fine) and ki_fine > 0):
+            raise ValueError(f"ki_fine={ki_fine} must be a positive number")
+        self.ki_fine, self.fine_band_px = ki_fine, float(fine_band_px)
+        if not 0.0 <= ff_margin < 0.5:
+            raise ValueError(f"ff_margin={ff_margin} must be in [0, 0.5)")
+        self.ff_margin = float(ff_margin)
+        if creep is not None and not callable(getattr(creep, "predict", None)):
+            raise TypeError("creep must be a CreepModel (predict/record/reset)")
+        self.creep = creep if feedforward else None  # without feed-forward nothing to compensate
+        if self.creep is not None:
+            self.creep.reset()
+        self._creep_ref = 0.0
+        self._comp = 0.0
+        self.max_slew_v = math.inf if max_slew_v is None else float(max_slew_v)
+        self.max_step_px = math.inf if max_step_px is None else float(max_step_px)
+        if not (self.max_slew_v > 0 and self.max_step_px > 0):
+            raise ValueError("max_slew_v and max_step_px must be > 0")
+        self.limits = tuple(float(v) for v in axis.limits)
+        if not self.limits[0] < self.limits[1]:
+            raise ValueError(f"axis limits {self.limits} are empty")
+        m_lo, m_hi = model.u_range
+        held = getattr(axis, "command", None)  # axes that report their command are cross-checked
+        if held is not None and abs(float(held) - model.state.u) > 1e-3 * (m_hi - m_lo):
+            raise ValueError(
+                f"the model's state ({model.state.u:.6g} V) is out of step with the axis, which holds "
+                f"{float(held):.6g} V: the feed-forward would jump blind. Drive the axis through the model "
+                "(model.forward) or reset the model (model.reset(u, branch)) first"
+            )
+        self.u = float(model.state.u)
+        self.at_limit = False
+        self.target = 0.0
+
+    def reach(self, y_meas: float, *, generous: bool = False) -> tuple[float, float]:
+        """Displacements (px, measurement frame) the axis can reach from ``y_meas`` within its limits
+        (:func:`axis_reach`)."""
+        lo, hi = axis_reach(self.model, self.limits, generous=generous)
+        y_model = self.model.state.y
+        return y_meas + (lo - y_model), y_meas + (hi - y_model)
+
+    def check_reach(self, target: float, y_meas: float, what: str = "target") -> None:
+        """Raise ValueError (with the reason) when the axis limits cannot reach ``target``."""
+        r_lo, r_hi = self.reach(y_meas, generous=True)
+        if not r_lo <= target <= r_hi:
+            u0, un = self.model.u_range
+            lo, hi = self.limits
+            beyond = (f" and an axis {REACH_SLOPE_FACTOR:g}x steeper than its extrapolation beyond the "
+                      f"characterised {u0:.4g}-{un:.4g} V") if lo < u0 or hi > un else ""
+            raise ValueError(
+                f"{what} {target:.4g} px is outside what {axis_identity(self.axis)!r} can reach within its "
+                f"limits [{lo:.4g}, {hi:.4g}] V: [{r_lo:.4g}, {r_hi:.4g}] px from here, allowing the model "
+                f"{REACH_TOLERANCE:.0%} error{beyond}"
+            )
+
+    # -- one move -------------------------------------------------------------------------------
+    def begin(self, target: float, y_meas: float, frame: int) -> None:
+        """Start a move to ``target`` (px, measurement frame) from the measured ``y_meas`` at ``frame``.
+
+        The feed-forward goal is the measured remaining distance added to the model's state, so the
+        model is re-anchored to the measured position at every move and its error does not accumulate.
+        """
+        target = float(target)
+        if not math.isfinite(target):
+            raise ValueError(f"target {target} px is not finite")
+        self.target = target
+        model, pid = self.model, self.pid
+        self.goal_model = model.state.y + (target - y_meas)
+        self.u_ref = self.u
+        # approach from one side: the feed-forward stops short by ff_margin of the move
+        short = self.ff_margin * (self.goal_model - model.state.y) if self.feedforward else 0.0
+        pid.reset(-short)
+        pid.ki = self._ki_coarse
+        if self.feedforward:
+            lo, hi = axis_reach(model, self.limits)
+            pid.set_limits(min(lo - self.goal_model, 0.0), max(hi - self.goal_model, 0.0))
+        else:
+            g = model.gain
+            pid.set_limits((self.limits[0] - self.u_ref) * g, (self.limits[1] - self.u_ref) * g)
+        # creep already present in the measurement the goal was computed from
+        self._creep_ref = self._creep_at(frame + 0.5)
+        self._ff_pos = model.state.y
+        self._ff_goal = self.goal_model - short
+        self._calm = 0
+
+    def act(self, y_meas: float, frame: int) -> float:
+        """One command, applied at once (it acts from frame ``frame + 1``); returns it.
+
+        While the feed-forward move is under way (one frame, or several of ``max_step_px``) the
+        measurement is not used; then the PID corrects the goal (with feed-forward) or the command.
+        """
+        if self.feedforward and self._ff_pos != self._ff_goal:
+            self._ff_pos = self._ff_step(self._ff_pos, self._ff_goal, frame)
+            return self.u
+        pid = self.pid
+        self._calm = self._calm + 1 if abs(self.target - y_meas) < self.fine_band_px else 0
+        if self.ki_fine is not None and self._calm >= 2:
+            pid.ki = self.ki_fine  # gain scheduling: settled, average the measurement noise
+        c = pid.update(self.target, y_meas)
+        if self.feedforward:
+            u = self._apply_displacement(self.goal_model + c, frame)
+        else:
+            u = self._apply(self.u_ref + c / self.model.gain)
+        lo, hi = pid.output_limits
+        pid.track(min(max(self._achieved(u), lo), hi))
+        return u
+
+    def end(self) -> None:
+        """The move is over: the PID's coarse gain back for the next one."""
+        self.pid.ki = self._ki_coarse
+
+    # -- actuation --------------------------------------------------------------------------------
+    def _creep_at(self, frames: float, extra=None) -> float:
+        if self.creep is None:
+            return 0.0
+        return self.creep.predict(frames * self.dt, extra)
+
+    def _apply(self, u: float) -> float:
+        """Slew limit, clip into the axis limits, apply, tell the shadow model; returns the command."""
+        u = min(max(u, self.u - self.max_slew_v), self.u + self.max_slew_v)
+        lo, hi = self.limits
+        self.at_limit = not lo < u < hi
+        u = min(max(u, lo), hi)
+        u = check_command(u, self.limits, "servo")
+        self.axis.apply(u)
+        held = getattr(self.axis, "command", None)  # what the DAC really holds, when the axis says
+        self.u = float(held) if held is not None and math.isfinite(float(held)) else u
+        self.model.forward(self.u)
+        return self.u
+
+    def _achieved(self, u: float) -> float:
+        """PID output that corresponds to the command actually applied (for anti-windup)."""
+        if self.feedforward:
+            return self.model.state.y + self._comp - self.goal_model
+        return (u - self.u_ref) * self.model.gain
+
+    def _apply_displacement(self, y_goal: float, frame: int) -> float:
+        """Feed-forward: the command whose model displacement, plus the creep predicted for the next
+        frame, is ``y_goal`` (creep compensation when a creep model is given)."""
+        t_cmd = frame + 1.0  # the command acts from the start of the next frame
+        comp = 0.0
+        u = self.model.inverse(y_goal)
+        if self.creep is not None:
+            for _ in range(2):  # the step being commanded creeps too: a fixed-point iteration
+                dy = self.model.displacement(min(max(u, self.limits[0]), self.limits[1])) - self.model.state.y
+                comp = self._creep_at(frame + 1.5, (t_cmd * self.dt, dy)) - self._creep_ref
+                u = self.model.inverse(y_goal - comp)
+        y_before = self.model.state.y
+        u = self._apply(u)
+        if self.creep is not None:
+            self.creep.record(t_cmd * self.dt, self.model.state.y - y_before)
+        self._comp = comp
+        return u
+
+    def _ff_step(self, pos: float, goal: float, frame: int) -> float:
+        step = goal - pos
+        if abs(step) > self.max_step_px:
+            step = math.copysign(self.max_step_px, step)
+        pos = goal if abs(goal - pos - step) < 1e-12 else pos + step
+        self._apply_displacement(pos, frame)
+        return pos
+
+
 class VisualServo:
     """Closed visual-servo loop on one axis (paper, Fig. 8a), used by :func:`step_response` and
-    :func:`move_to`.
+    :func:`move_to`: the tracker measures the probe, the displacement along the axis' image direction
+    goes to an :class:`AxisLoop`.
 
     Parameters
     ----------
@@ -246,6 +490,7 @@ class VisualServo:
     model : HysteresisModel
         Fitted on this axis; it is the shadow of the axis (its state must be the axis' current command
         and history, as after :func:`~semlab.hysteresis.fit_hysteresis` or a previous servo run).
+        Commands may leave its characterised range (it extrapolates); they never leave the axis limits.
     tracker : object, optional
         ``init/update`` tracker; default ``semlab.tracking.Tracker()`` (:func:`step_response` widens its
         search window to the size of the step so that the feed-forward jump stays inside it).
@@ -271,77 +516,40 @@ class VisualServo:
     ff_margin : float
         The feed-forward aims short of the target by this fraction of the move (default 2.5 %): the
         probe then approaches from one side and a model error cannot turn into an overshoot; the PID
-        starts from that offset and closes the gap. On the simulated rig the feed-forward's own error
-        on a 100-px step (polynomial model plus creep compensation) ranged from 4.6 px short to 2.35 px
-        long (one start in 24); on 48 steps from starts the bench does not report
-        (``benchmarks/bench_servo.py`` setup), the targets were met 33 times with no margin, 40 with
-        1.5 % and 45 with 2.5 % (3 %: 18 of 24 -- more for the PID to close while the tracker's
-        template is young).
+        starts from that offset and closes the gap (``benchmarks/bench_servo.py`` compares margins).
     warmup_frames : int
         Frames the tracker follows the still probe in :meth:`start` before anything moves (no command
         is sent; default 0). A researcher's tracker runs continuously, so a template matured before the
         step is legitimate; it costs ``warmup_frames * frame_period`` of waiting before the step command
-        (28 frames, 2.2 s at 13 Hz, mature the default tracker's 20-frame template with 8 frames to
-        spare for the start point; response times still run from the step command). The start point
-        is then the line fitted to the last ``REFERENCE_FRAMES`` warm-up positions, evaluated at the
-        last warm-up frame (less noise than one frame, no lag from creep). Measured on the simulated
-        rig it does not pay for 100-px steps (``benchmarks/bench_servo.py``, section 3b: worst 48
-        frames to +-0.5 px, overshoot 0.89 px, final std 0.27 px, vs 19, 0.51 and 0.14 without): the
-        template then holds the clutter around the start position, which no longer lies around the
-        probe after the step, while a template started at the step is averaged at the target. It
-        suits small moves, or a clean background.
+        (response times still run from the step command). The start point is then the line fitted to
+        the last ``REFERENCE_FRAMES`` warm-up positions, evaluated at the last warm-up frame (less noise
+        than one frame, no lag from creep). With clutter around the start position the matured
+        template holds clutter that no longer lies around the probe after a large step; it suits small
+        moves, or a clean background (``benchmarks/bench_servo.py`` measures it).
     """
 
     def __init__(self, microscope, axis, model, *, tracker=None, feedforward: bool = True, pid=None,
                  max_slew_v: float | None = None, max_step_px: float | None = None, creep=None,
                  ki_fine: float | None = 0.25, fine_band_px: float = 0.5, ff_margin: float = 0.025,
                  warmup_frames: int = 0):
-        if model is None:
-            raise ValueError("a hysteresis model is required (it supplies at least direction and gain)")
-        model.check_axis(axis)
-        self.microscope, self.axis, self.model = microscope, axis, model
+        self.microscope = microscope
+        self.dt = float(microscope.frame_period)
+        self.loop = AxisLoop(axis, model, frame_period=self.dt, feedforward=feedforward, pid=pid, creep=creep,
+                             ki_fine=ki_fine, fine_band_px=fine_band_px, ff_margin=ff_margin,
+                             max_slew_v=max_slew_v, max_step_px=max_step_px)
+        self.axis, self.model = axis, model
         self.tracker = _default_tracker(tracker)
         self.warmup_frames = _warmup_frames(warmup_frames)
-        self.feedforward = bool(feedforward)
-        self.pid = pid if pid is not None else (PID(ki=0.8) if feedforward else PID(ki=0.45))
-        self._ki_coarse = self.pid.ki
-        if ki_fine is not None and not (math.isfinite(ki_fine) and ki_fine > 0):
-            raise ValueError(f"ki_fine={ki_fine} must be a positive number")
-        self.ki_fine, self.fine_band_px = ki_fine, float(fine_band_px)
-        if not 0.0 <= ff_margin < 0.5:
-            raise ValueError(f"ff_margin={ff_margin} must be in [0, 0.5)")
-        self.ff_margin = float(ff_margin)
-        if creep is not None and not callable(getattr(creep, "predict", None)):
-            raise TypeError("creep must be a CreepModel (predict/record/reset)")
-        self.creep = creep if feedforward else None  # without feed-forward nothing to compensate
-        if self.creep is not None:
-            self.creep.reset()
-        self._creep_ref = 0.0
-        self._comp = 0.0
-        self.max_slew_v = math.inf if max_slew_v is None else float(max_slew_v)
-        self.max_step_px = math.inf if max_step_px is None else float(max_step_px)
-        if not (self.max_slew_v > 0 and self.max_step_px > 0):
-            raise ValueError("max_slew_v and max_step_px must be > 0")
-        a_lo, a_hi = (float(v) for v in axis.limits)
-        m_lo, m_hi = model.u_range
-        self.u_lo, self.u_hi = max(a_lo, m_lo), min(a_hi, m_hi)
-        if not self.u_lo < self.u_hi:
-            raise ValueError("the model's voltage range does not overlap the axis limits")
-        held = getattr(axis, "command", None)  # axes that report their command are cross-checked
-        if held is not None and abs(float(held) - model.state.u) > 1e-3 * (m_hi - m_lo):
-            raise ValueError(
-                f"the model's state ({model.state.u:.6g} V) is out of step with the axis, which holds "
-                f"{float(held):.6g} V: the feed-forward would jump blind. Drive the axis through the model "
-                "(model.forward) or reset the model (model.reset(u, branch)) first"
-            )
         self.direction = np.asarray(model.direction, dtype=float)
-        self.dt = float(microscope.frame_period)
         self.rows: list[dict] = []
         self.frame = -1
-        self.u = float(model.state.u)
-        self.last_safe_u = self.u
         self.y_meas = 0.0
-        self._u_effect = self.u  # the command in effect during the frame being acquired
+        self._u_effect = self.loop.u  # the command in effect during the frame being acquired
+
+    feedforward = property(lambda self: self.loop.feedforward)
+    pid = property(lambda self: self.loop.pid)
+    creep = property(lambda self: self.loop.creep)
+    u = property(lambda self: self.loop.u)
 
     # -- measurement --------------------------------------------------------------------------------
     def start(self, roi) -> VisualServo:
@@ -397,11 +605,13 @@ class VisualServo:
         disp = float((np.array([x, y]) - self.p0) @ self.direction) if ok else float("nan")
         self.rows.append({"frame": self.frame, "t": self.frame * self.dt, "u": self._u_effect, "x": x,
                           "y": y, "displacement": disp, "target": float(target), "ok": bool(ok),
-                          "held": bool(held), "stage": stage})
+                          "held": bool(held), "stage": stage, "at_limit": bool(self._at_limit_effect)})
+
+    _at_limit_effect = False
 
     def _grab_measure(self):
         """Grab the next frame (the last command is in effect) and measure; returns (x, y, ok)."""
-        self._u_effect = self.u
+        self._u_effect, self._at_limit_effect = self.loop.u, self.loop.at_limit
         frame = self.microscope.grab()
         self.frame += 1
         x, y, _, ok = _read_result(self.tracker.update(frame))
@@ -413,28 +623,10 @@ class VisualServo:
         return x, y, ok
 
     # -- actuation ------------------------------------------------------------------------------------
-    def _apply(self, u: float) -> float:
-        """Clip into limits and slew, apply, tell the shadow model; returns the command used."""
-        u = min(max(u, self.u - self.max_slew_v), self.u + self.max_slew_v)
-        u = min(max(u, self.u_lo), self.u_hi)
-        u = check_command(u, tuple(float(v) for v in self.axis.limits), "servo")
-        self.axis.apply(u)
-        self.model.forward(u)
-        self.u = u
-        self.last_safe_u = u
-        return u
-
-    def _achieved(self, u: float, goal_model: float, u_ref: float) -> float:
-        """PID output that corresponds to the command actually applied (for anti-windup)."""
-        if self.feedforward:
-            return self.model.state.y + self._comp - goal_model
-        return (u - u_ref) * self.model.gain
-
-    def reachable(self) -> tuple[float, float]:
-        """Displacements (px, measurement frame) the piezo can reach from here, per the model."""
-        lo, hi = self.model.displacement_range
-        y_model = self.model.state.y
-        return self.y_meas + (lo - y_model), self.y_meas + (hi - y_model)
+    def reachable(self, *, generous: bool = False) -> tuple[float, float]:
+        """Displacements (px, measurement frame) the axis can reach from here within its limits, per
+        the model (``generous``: allowing for the model's error, see :func:`axis_reach`)."""
+        return self.loop.reach(self.y_meas, generous=generous)
 
     def goto(self, target: float, n_frames: int, *, stage: str = "nano") -> None:
         """Servo to ``target`` px (measured from the start reference) for ``n_frames`` frames.
@@ -442,95 +634,24 @@ class VisualServo:
         Raises
         ------
         ValueError
-            NaN target, or a target the piezo cannot reach according to the model.
+            NaN target, or a target the axis limits cannot reach (:meth:`AxisLoop.check_reach`).
         """
         target = float(target)
         if not math.isfinite(target):
             raise ValueError(f"target {target} px is not finite")
-        r_lo, r_hi = self.reachable()
-        if not r_lo <= target <= r_hi:
-            raise ValueError(
-                f"target {target:.4g} px is outside the model's range from here [{r_lo:.4g}, {r_hi:.4g}] px;"
-                " use move_to(..., macro=...) for a macro/nano hand-over"
-            )
-        # feed-forward goal in model coordinates: the measured remaining distance from the model state
-        goal_model = self.model.state.y + (target - self.y_meas)
-        u_ref = self.u
-        pid = self.pid
-        # approach from one side: the feed-forward stops short by ff_margin of the move
-        short = self.ff_margin * (goal_model - self.model.state.y) if self.feedforward else 0.0
-        pid.reset(-short)
-        pid.ki = self._ki_coarse
-        if self.feedforward:
-            lo, hi = self.model.displacement_range
-            pid.set_limits(lo - goal_model, hi - goal_model)
-        else:
-            g = self.model.gain
-            pid.set_limits((self.u_lo - u_ref) * g, (self.u_hi - u_ref) * g)
-        # creep already present in the measurement the goal was computed from
-        self._creep_ref = self._creep_at(self.frame + 0.5)
+        self.loop.check_reach(target, self.y_meas)
+        self.loop.begin(target, self.y_meas, self.frame)
         # the first command is sent right after the latest frame (no frame is wasted); from then on
         # one command per frame, each acting from the next frame
-        state = {"ff_pos": self.model.state.y, "calm": 0}
-        ff_goal = goal_model - short
-
-        def act():
-            if self.feedforward and state["ff_pos"] != ff_goal:
-                state["ff_pos"] = self._ff_step(state["ff_pos"], ff_goal)
-                return
-            e = target - self.y_meas
-            state["calm"] = state["calm"] + 1 if abs(e) < self.fine_band_px else 0
-            if self.ki_fine is not None and state["calm"] >= 2:
-                pid.ki = self.ki_fine  # gain scheduling: settled, average the measurement noise
-            c = pid.update(target, self.y_meas)
-            if self.feedforward:
-                u = self._apply_displacement(goal_model + c)
-            else:
-                u = self._apply(u_ref + c / self.model.gain)
-            lo, hi = pid.output_limits
-            pid.track(min(max(self._achieved(u, goal_model, u_ref), lo), hi))
-
-        act()
+        self.loop.act(self.y_meas, self.frame)
         for _ in range(int(n_frames)):
             x, y, ok = self._grab_measure()
             if not ok:  # safety: hold the last safe command, do not integrate, flag the row
                 self._record(x, y, False, target=target, stage=stage, held=True)
                 continue
             self._record(x, y, True, target=target, stage=stage, held=False)
-            act()
-        pid.ki = self._ki_coarse
-
-    def _creep_at(self, frames: float, extra=None) -> float:
-        if self.creep is None:
-            return 0.0
-        return self.creep.predict(frames * self.dt, extra)
-
-    def _apply_displacement(self, y_goal: float) -> float:
-        """Feed-forward: the command whose model displacement, plus the creep predicted for the next
-        frame, is ``y_goal`` (creep compensation when a creep model is given)."""
-        lo, hi = self.model.displacement_range
-        t_cmd = self.frame + 1.0  # the command acts from the start of the next frame
-        comp = 0.0
-        u = self.model.inverse(min(max(y_goal, lo), hi))
-        if self.creep is not None:
-            for _ in range(2):  # the step being commanded creeps too: a fixed-point iteration
-                dy = self.model.displacement(u) - self.model.state.y
-                comp = self._creep_at(self.frame + 1.5, (t_cmd * self.dt, dy)) - self._creep_ref
-                u = self.model.inverse(min(max(y_goal - comp, lo), hi))
-        y_before = self.model.state.y
-        u = self._apply(u)
-        if self.creep is not None:
-            self.creep.record(t_cmd * self.dt, self.model.state.y - y_before)
-        self._comp = comp
-        return u
-
-    def _ff_step(self, pos: float, goal: float) -> float:
-        step = goal - pos
-        if abs(step) > self.max_step_px:
-            step = math.copysign(self.max_step_px, step)
-        pos = goal if abs(goal - pos - step) < 1e-12 else pos + step
-        self._apply_displacement(pos)
-        return pos
+            self.loop.act(self.y_meas, self.frame)
+        self.loop.end()
 
     def macro_handover(self, target: float, macro, *, pixel_size_nm: float, chunk_px: float = 40.0,
                        settle_frames: int = 2, max_chunks: int = 200) -> None:
@@ -593,7 +714,10 @@ def step_response(microscope, axis, roi, step_px, *, model, feedforward=True, n_
         Desired displacement along the axis direction; ``> 0`` moves the probe the way rising voltage
         does.
     model : HysteresisModel
-        Its state must match the axis (as after ``fit_hysteresis`` or a previous servo run).
+        Its state must match the axis (as after ``fit_hysteresis`` or a previous servo run); it follows
+        the axis through the run (reversal memory), so the next call starts where this one left it.
+        Its characterised range limits what the feed-forward predicts, not the move: the command may
+        go anywhere within ``axis.limits``, never past them.
     feedforward : bool
         True: the model's inverse makes the move in one step and the PID removes the residual;
         False: PID only, the model supplies direction and gain.
@@ -610,17 +734,18 @@ def step_response(microscope, axis, roi, step_px, *, model, feedforward=True, n_
     Returns
     -------
     DataFrame
-        One row per frame: ``frame, t, u, x, y, displacement, target, ok`` (plus ``held``, ``stage``).
-        ``u`` is the command in effect while the frame was acquired, ``displacement`` the tracked
-        position projected on the axis direction relative to the start point (row 0: the ROI centre,
-        or after a warm-up the fitted start point; NaN when ``ok`` is False),
-        ``held`` marks frames where the tracker was lost and the last safe command was held.
+        One row per frame: ``frame, t, u, x, y, displacement, target, ok`` (plus ``held``, ``stage``,
+        ``at_limit``). ``u`` is the command in effect while the frame was acquired, ``displacement`` the
+        tracked position projected on the axis direction relative to the start point (row 0: the ROI
+        centre, or after a warm-up the fitted start point; NaN when ``ok`` is False), ``held`` marks
+        frames where the tracker was lost and the last safe command was held, ``at_limit`` frames whose
+        command the axis limits clipped (the probe could not go further that way).
 
     Raises
     ------
     ValueError
-        NaN step, a step outside the model's reach, a model fitted on another axis, or a tracker that
-        reports a NaN position as valid.
+        NaN step, a step the axis limits cannot reach (:meth:`AxisLoop.check_reach`, with the reason),
+        a model fitted on another axis, or a tracker that reports a NaN position as valid.
 
     Examples
     --------
@@ -642,11 +767,7 @@ def step_response(microscope, axis, roi, step_px, *, model, feedforward=True, n_
         jump = abs(step_px) if params.get("max_step_px") is None else min(abs(step_px), params["max_step_px"])
         params["tracker"] = _default_tracker(None, jump_px=jump, roi=roi)
     servo = VisualServo(microscope, axis, model, feedforward=feedforward, **params)
-    # refuse an unreachable step before anything moves
-    r_lo, r_hi = servo.reachable()
-    if not r_lo <= step_px <= r_hi:
-        raise ValueError(f"step of {step_px:.4g} px is outside the model's reach from the current state "
-                         f"[{r_lo:.4g}, {r_hi:.4g}] px")
+    servo.loop.check_reach(step_px, 0.0, "step of")  # refuse an unreachable step before anything moves
     servo.start(roi)
     servo.rows[0]["target"] = step_px
     servo.goto(step_px, n_frames - 1, stage="feedforward" if feedforward else "pid")
@@ -685,10 +806,12 @@ def move_to(microscope, axis, roi, distance_px, *, model, macro=None, pixel_size
         raise ValueError(f"distance_px {distance_px} is not finite")
     servo = VisualServo(microscope, axis, model, feedforward=feedforward, **params)
     r_lo, r_hi = servo.reachable()
-    needs_macro = not r_lo <= distance_px <= r_hi
-    if needs_macro and macro is None:
-        raise ValueError(f"a move of {distance_px:.4g} px is beyond the piezo's reach [{r_lo:.4g}, {r_hi:.4g}] px;"
-                         " pass macro= for a macro/nano hand-over")
+    needs_macro = macro is not None and not r_lo <= distance_px <= r_hi
+    if macro is None:
+        try:
+            servo.loop.check_reach(distance_px, 0.0, "a move of")
+        except ValueError as err:
+            raise ValueError(f"{err}: it is beyond the piezo; pass macro= for a macro/nano hand-over") from None
     servo.start(roi)
     servo.rows[0]["target"] = distance_px
     if needs_macro:

@@ -434,9 +434,92 @@ def test_unreachable_step_is_refused_before_anything_moves(hysteretic):
     rig, _, model = hysteretic
     go_to_state(rig, model, [50.0])
     rig.axis.sent.clear()
-    with pytest.raises(ValueError, match="outside the model's reach"):
+    with pytest.raises(ValueError, match="outside what 'fake 0 x' can reach within its limits"):
         step_response(rig.microscope, rig.axis, ROI, rig.k, model=model, tracker=FakeTracker(rig))
     assert rig.axis.sent == []
+
+
+@pytest.fixture(scope="module")
+def sub_range():
+    """A rig characterised over 20-80 V of its 0-100 V axis, as a researcher keeps the probe in view
+    (the characterisation ends at 20 V, the model's lower end)."""
+    rig = FakeRig()
+    char = characterise_hysteresis(rig.microscope, rig.axis, ROI, u_min=20.0, u_max=80.0, n_steps=30,
+                                   tracker=FakeTracker(rig))
+    return rig, fit_hysteresis(char, kind="pi")
+
+
+def _true_disp(rig, p0):
+    return float((rig.position - p0) @ rig.d)
+
+
+def test_a_step_back_past_where_the_characterisation_ended_is_made(sub_range):
+    rig, model = sub_range
+    model = model.copy()
+    go_to_state(rig, model, [20.0])
+    p0 = rig.position.copy()
+    up = step_response(rig.microscope, rig.axis, ROI, 100.0, model=model, n_frames=20, tracker=FakeTracker(rig))
+    assert _true_disp(rig, p0) == pytest.approx(100.0, abs=0.1)
+    # 3 px below where the characterisation left the probe: only a voltage below 20 V gets there
+    rig.axis.sent.clear()
+    down = step_response(rig.microscope, rig.axis, ROI, -103.0, model=model, n_frames=20,
+                         tracker=FakeTracker(rig))
+    assert min(rig.axis.sent) < 20.0
+    assert _true_disp(rig, p0) == pytest.approx(-3.0, abs=0.1)  # an exact tracker: only the loop's error
+    for resp in (up, down):
+        m = step_metrics(resp)
+        assert m["response_frames_0p5px"] <= 6 and m["overshoot_px"] <= 0.5
+    assert model.state.u == rig.axis.command  # the model followed the axis below its range and back
+
+
+def test_only_what_the_axis_limits_cannot_reach_is_refused(sub_range):
+    rig, model = sub_range
+    model = model.copy()
+    go_to_state(rig, model, [20.0, 60.0])
+    p0 = rig.position.copy()
+    top = FakeRig()
+    top._update(100.0)  # the truth at the axis limit (saturated: the same from any history)
+    reach_true = top.disp - rig.disp
+    # beyond the characterised 80 V but inside the axis' 100 V: made, and the feedback finishes it
+    resp = step_response(rig.microscope, rig.axis, ROI, 0.9 * reach_true, model=model, n_frames=25,
+                         tracker=FakeTracker(rig))
+    assert rig.axis.command > 80.0
+    assert _true_disp(rig, p0) == pytest.approx(0.9 * reach_true, abs=0.1)
+    assert not resp["at_limit"].any()
+    # 3 px beyond what 100 V can do, inside the allowance for model error: tried, the command stops at
+    # the limit, the rows say so, and nothing goes past it
+    go_to_state(rig, model, [60.0])
+    p0 = rig.position.copy()
+    reach_true = top.disp - rig.disp
+    rig.axis.sent.clear()
+    resp = step_response(rig.microscope, rig.axis, ROI, reach_true + 3.0, model=model, n_frames=25,
+                         tracker=FakeTracker(rig))
+    assert max(rig.axis.sent) == 100.0 and resp["at_limit"].iloc[-5:].all()
+    assert _true_disp(rig, p0) == pytest.approx(reach_true, abs=0.5)
+    # far beyond: refused with the reason before anything moves
+    go_to_state(rig, model, [60.0])
+    rig.axis.sent.clear()
+    with pytest.raises(ValueError, match=r"can reach within its limits \[0, 100\] V.*beyond the characterised 20-80"):
+        step_response(rig.microscope, rig.axis, ROI, 3 * reach_true, model=model, tracker=FakeTracker(rig))
+    assert rig.axis.sent == []
+
+
+def test_the_model_is_re_anchored_at_every_move_so_its_error_does_not_accumulate():
+    # the model is fitted on a piezo 6 % weaker than the one it drives: each open-loop feed-forward
+    # then misses by ~6 % of that move (and the margin), never by the sum of earlier misses
+    weak = FakeRig(px_per_travel=400.0 / 1.06)
+    _, model = characterised(weak, kind="pi")
+    rig = FakeRig()
+    go_to_state(rig, model, [0.0, 40.0])
+    misses = []
+    for step in (60.0, -30.0, 50.0, -80.0, 40.0, 60.0):
+        resp = step_response(rig.microscope, rig.axis, ROI, step, model=model, n_frames=15,
+                             tracker=FakeTracker(rig))
+        misses.append(abs(resp["displacement"].iloc[1] - step) / abs(step))
+        assert abs(resp["displacement"].iloc[-1] - step) < 0.1
+        assert model.state.u == rig.axis.command
+    # 6 % stronger, aiming 2.5 % short: 0.975 * 1.06 - 1 = 3.4 % (the loop's inner curves differ a little)
+    assert max(misses) < 0.06 and misses[-1] < 2 * misses[0]
 
 
 def test_nan_target_and_nan_measurement_are_refused(hysteretic):
@@ -506,7 +589,7 @@ def test_macro_nano_handover_for_a_move_beyond_the_piezo(hysteretic):
     rig, _, model = hysteretic
     go_to_state(rig, model, [50.0])
     p0 = rig.position.copy()
-    with pytest.raises(ValueError, match="beyond the piezo"):
+    with pytest.raises(ValueError, match="beyond the piezo; pass macro="):
         move_to(rig.microscope, rig.axis, ROI, 900.0, model=model, tracker=FakeTracker(rig))
     resp = move_to(rig.microscope, rig.axis, ROI, 900.0, model=model, macro=rig.macro, pixel_size_nm=66.0,
                    n_frames=20, tracker=FakeTracker(rig))
