@@ -6,7 +6,7 @@ The handful of calls a notebook or a script needs, after Ru et al. (2012),
 - tracking: :func:`track`, :class:`Tracker`, :func:`roi_from_click`, :func:`roi_from_motion`,
   :func:`identify_contour_template`, :func:`adaptive_canny_thresholds`
 - control: :func:`characterise_hysteresis`, :func:`fit_hysteresis`, :func:`step_response`,
-  :func:`step_metrics`
+  :func:`step_metrics`, :func:`move_probe_to` (a point of the image, several axes at once)
 - data: :func:`read_frames`, :func:`read_image`, :func:`load_sample` (the samples in ``data/``)
 - widgets: :class:`TemplateExplorer`, :class:`TrackingPlayer`, :class:`ServoPanel`; figures in :mod:`semlab.plots`
 - the simulated rig lives in :mod:`semlab.sim`, the hardware protocols in :mod:`semlab.protocols`.
@@ -51,6 +51,11 @@ _EXPORTS = {
     "PIHysteresis": "semlab.hysteresis",
     "PID": "semlab.control",
     "VisualServo": "semlab.control",
+    # servo to a point: several axes at once, several probes from one frame stream
+    "move_probe_to": "semlab.pointing",
+    "move_probes_to": "semlab.pointing",
+    "ProbeMove": "semlab.pointing",
+    "point_metrics": "semlab.pointing",
     # data in and out
     "read_frames": "semlab.io",
     "read_image": "semlab.io",
