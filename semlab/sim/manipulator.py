@@ -102,29 +102,32 @@ class MacroStepper:
 class NanoAxis:
     """One piezo channel; implements :class:`semlab.protocols.Axis`.
 
+    ``volts``, ``bits`` and ``creep`` override the Zyvex defaults (the alternative rig of
+    :class:`~semlab.sim.SimulatedRig`: a 0-150 V amplifier, 16-bit DACs on every axis).
+
     Attributes
     ----------
     limits : (float, float)
-        ``(0.0, 100.0)`` V.
+        ``(0.0, 100.0)`` V by default.
     bits : int
-        DAC resolution (16 for x/z, 12 for y).
+        DAC resolution (16 for x/z, 12 for y by default).
     lsb_volts : float
-        DAC step, ``100 V / 2**bits``.
+        DAC step, ``(limits[1] - limits[0]) / 2**bits``.
     travel_nm : float
         Nominal travel at full command.
     """
 
     def __init__(self, name: str, axis: str, params: PiezoParameters | None = None,
-                 hysteresis: PreisachHysteresis | None = None):
+                 hysteresis: PreisachHysteresis | None = None, *, volts=PIEZO_VOLTS, bits=None, creep=None):
         self.name = name
         self.axis = axis
-        self.limits = PIEZO_VOLTS
-        self.bits = DAC_BITS[axis]
-        self._dac = DAC(self.bits, *PIEZO_VOLTS)
+        self.limits = (float(volts[0]), float(volts[1]))
+        self.bits = DAC_BITS[axis] if bits is None else int(bits)
+        self._dac = DAC(self.bits, *self.limits)
         self.lsb_volts = self._dac.lsb
         self.travel_nm = NANO_TRAVEL_NM[axis]
-        self._piezo = PiezoAxis(self.travel_nm, *PIEZO_VOLTS, params=params, hysteresis=hysteresis)
-        self._applied = PIEZO_VOLTS[0]
+        self._piezo = PiezoAxis(self.travel_nm, *self.limits, params=params, hysteresis=hysteresis, creep=creep)
+        self._applied = self.limits[0]
         self._pending = None
 
     def apply(self, volts: float) -> None:
@@ -157,16 +160,23 @@ class NanoAxis:
 
 
 class Manipulator:
-    """A 3-DOF manipulator: a macro stepper and a nano piezo per axis."""
+    """A 3-DOF manipulator: a macro stepper and a nano piezo per axis.
+
+    ``hysteresis_factory(index, axis)`` and ``creep_factory(index, axis)`` give each piezo its own
+    hysteresis and creep (default: Preisach, log creep); ``nano_options`` go to every
+    :class:`NanoAxis` (``volts``, ``bits``).
+    """
 
     def __init__(self, index: int, params: PiezoParameters | None = None,
-                 hysteresis_factory=None):
+                 hysteresis_factory=None, *, creep_factory=None, nano_options=None):
         self.index = index
         self.nano = {}
         self.macro = {}
         for a in AXES:
             hyst = hysteresis_factory(index, a) if hysteresis_factory is not None else None
-            self.nano[a] = NanoAxis(f"manipulator {index} {a} piezo", a, params, hyst)
+            creep = creep_factory(index, a) if creep_factory is not None else None
+            self.nano[a] = NanoAxis(f"manipulator {index} {a} piezo", a, params, hyst, creep=creep,
+                                    **(nano_options or {}))
             self.macro[a] = MacroStepper(f"manipulator {index} {a} macro", a)
 
     def _latch(self, t: float) -> None:

@@ -9,6 +9,13 @@ not a Prandtl-Ishlinskii model, whose weight would depend on ``alpha - beta`` on
 Signal chain of one nano axis: command -> DAC quantisation -> first-order lag (the
 amplifier and the piezo's capacitance, time constant of a few ms) -> rate-independent
 hysteresis -> logarithmic creep -> displacement in nm.
+
+An independently built alternative, for benchmarks on a piezo whose hysteresis is not the
+family any model assumes: :class:`PrandtlIshlinskiiHysteresis`, play operators of uneven
+thresholds followed by a static output nonlinearity (so neither the polynomial model, nor
+semlab's PI model, whose shaping acts on the input, contains it), with
+:class:`ExponentialCreep` (a chain of Kelvin-Voigt relaxations, not the log law the
+controller's creep model assumes).
 """
 
 from __future__ import annotations
@@ -19,7 +26,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import exprel
 
-__all__ = ["DAC", "LogCreep", "PiezoAxis", "PiezoParameters", "PreisachHysteresis"]
+__all__ = ["DAC", "ExponentialCreep", "LogCreep", "PiezoAxis", "PiezoParameters", "PrandtlIshlinskiiHysteresis",
+           "PreisachHysteresis"]
 
 
 class PreisachHysteresis:
@@ -144,6 +152,134 @@ class PreisachHysteresis:
         return np.array([self.update(v) for v in v_path])
 
 
+class PrandtlIshlinskiiHysteresis:
+    """Prandtl-Ishlinskii hysteresis with a static output nonlinearity (a generalised PI model).
+
+    Input ``v`` and output ``y`` normalised as for :class:`PreisachHysteresis` (``y`` = 1 at
+    ``v`` = 1 from the relaxed state). With play operators ``F_r`` (backlash of half-width
+    ``r``)::
+
+        p = sum_j w_j (F_{r_j}[v] - r_j) / sum_j w_j (1 - 2 r_j),   y = g(p) = (p + a p^2 + b p^3) / (1 + a + b)
+
+    Thresholds ``r_j = r_max (j / (n - 1))^1.5`` (denser at narrow widths) and weights
+    ``w_j = exp(-decay r_j)``, except ``w_0`` (``r_0 = 0``, the reversible part), set so that it
+    carries the fraction ``reversible`` of ``p``'s travel. A PI operator
+    alone gives a point-symmetric major loop with congruent minor loops; the output
+    nonlinearity ``g`` (monotone for ``a, b >= 0``) breaks both, as a real piezo's loop does.
+    The plays give wiping-out and return-point memory, so minor loops close.
+
+    Parameters
+    ----------
+    n_plays : int
+        Number of play operators.
+    max_threshold : float
+        ``r_max``, the widest play's half-width (normalised input).
+    decay : float
+        Decay of the weights with the threshold.
+    reversible : float
+        Share of the reversible (threshold 0) play in the travel of ``p``, in [0, 1).
+    quadratic, cubic : float
+        ``a`` and ``b`` of the output nonlinearity (>= 0).
+    """
+
+    def __init__(self, n_plays=12, max_threshold=0.2, decay=4.0, reversible=0.25, quadratic=0.45, cubic=0.2):
+        if int(n_plays) != n_plays or n_plays < 1:
+            raise ValueError(f"n_plays must be a positive integer, got {n_plays!r}")
+        if not 0.0 <= max_threshold < 0.5:
+            raise ValueError(f"max_threshold must lie in [0, 0.5), got {max_threshold}")
+        if quadratic < 0 or cubic < 0:
+            raise ValueError("quadratic and cubic must be >= 0 (a monotone output nonlinearity)")
+        if not 0.0 <= reversible < 1.0 or (int(n_plays) == 1 and reversible == 0.0):
+            raise ValueError(f"reversible must lie in [0, 1) (and > 0 with one play), got {reversible}")
+        j = np.arange(int(n_plays))
+        self.thresholds = float(max_threshold) * (j / max(int(n_plays) - 1, 1)) ** 1.5
+        self.weights = np.exp(-float(decay) * self.thresholds)
+        rest = float(self.weights[1:] @ (1.0 - 2.0 * self.thresholds[1:]))
+        self.weights[0] = 1.0 if rest == 0.0 else reversible * rest / (1.0 - reversible)
+        self._norm = float(self.weights @ (1.0 - 2.0 * self.thresholds))
+        self.quadratic, self.cubic = float(quadratic), float(cubic)
+        self.reset()
+
+    def reset(self) -> None:
+        """Relaxed: after a descent to 0, every play sits at its threshold."""
+        self._z = self.thresholds.copy()
+        self._v = 0.0
+
+    @property
+    def input(self) -> float:
+        return self._v
+
+    def operator_output(self) -> float:
+        """``p``, the normalised PI operator output before the static nonlinearity."""
+        return float(self.weights @ (self._z - self.thresholds)) / self._norm
+
+    def update(self, v: float) -> float:
+        """Move the input to ``v`` (in [0, 1]) and return the output."""
+        v = float(v)
+        if not (0.0 <= v <= 1.0) or not math.isfinite(v):
+            raise ValueError(f"PI input must lie in [0, 1], got {v}")
+        self._z = np.maximum(v - self.thresholds, np.minimum(v + self.thresholds, self._z))
+        self._v = v
+        return self.output()
+
+    def output(self) -> float:
+        p = self.operator_output()
+        a, b = self.quadratic, self.cubic
+        return (p + a * p * p + b * p**3) / (1.0 + a + b)
+
+    def branch(self, v_path) -> np.ndarray:
+        """Outputs along an input path (stateful: the model ends at the last input)."""
+        return np.array([self.update(v) for v in v_path])
+
+
+class ExponentialCreep:
+    """Creep as a chain of Kelvin-Voigt relaxations: each displacement step ``D`` made at ``t_j``
+    adds ``D * sum_k c_k (1 - exp(-(t - t_j) / tau_k))``.
+
+    A different law from :class:`LogCreep` (and from the log law of the controller's creep model):
+    it saturates at ``D * sum c_k`` instead of growing per decade for ever. The sums over past steps
+    are kept exactly by recursion (no memory limit).
+
+    Parameters
+    ----------
+    fractions : sequence of float
+        ``c_k``, the creep of each relaxation as a fraction of the step (>= 0).
+    time_constants : sequence of float
+        ``tau_k`` in s (> 0).
+    """
+
+    def __init__(self, fractions=(0.008, 0.012, 0.015), time_constants=(0.3, 3.0, 30.0)):
+        c = np.asarray(fractions, float)
+        tau = np.asarray(time_constants, float)
+        if c.shape != tau.shape or c.ndim != 1 or np.any(c < 0) or np.any(tau <= 0):
+            raise ValueError("ExponentialCreep needs matching fractions >= 0 and time constants > 0")
+        self.fractions, self.time_constants = c, tau
+        self.reset()
+
+    def reset(self) -> None:
+        self._total = 0.0  # sum of all steps
+        self._decaying = np.zeros_like(self.fractions)  # sum_j D_j exp(-(t_ref - t_j) / tau_k)
+        self._t_ref = 0.0
+
+    def add_step(self, t: float, step: float) -> None:
+        """Register a displacement ``step`` that started at time ``t``."""
+        if step == 0.0:
+            return
+        t = float(t)
+        if t > self._t_ref:
+            self._decaying *= np.exp(-(t - self._t_ref) / self.time_constants)
+            self._t_ref = t
+        self._decaying += step * np.exp(-(self._t_ref - t) / self.time_constants)
+        self._total += step
+
+    def value(self, t: float) -> float:
+        """Creep displacement at time ``t`` (not before the last step)."""
+        if t < self._t_ref:
+            raise ValueError(f"creep asked at t={t} s, before its last step at {self._t_ref} s")
+        decayed = self._decaying * np.exp(-(t - self._t_ref) / self.time_constants)
+        return float(self.fractions @ (self._total - decayed))
+
+
 class LogCreep:
     """Logarithmic creep superposed per step (the usual piezo creep law).
 
@@ -264,16 +400,18 @@ class PiezoAxis:
         Command range in volts.
     params : PiezoParameters
         Lag/creep settings.
-    hysteresis : PreisachHysteresis or None
-        The hysteresis model (a fresh default one if ``None``).
+    hysteresis : PreisachHysteresis, PrandtlIshlinskiiHysteresis or None
+        The hysteresis model (a fresh default Preisach one if ``None``).
+    creep : LogCreep, ExponentialCreep or None
+        The creep law (default: ``LogCreep`` from ``params``).
     """
 
     def __init__(self, travel_nm, u0, un, params: PiezoParameters | None = None,
-                 hysteresis: PreisachHysteresis | None = None):
+                 hysteresis: PreisachHysteresis | None = None, creep=None):
         self.travel_nm, self.u0, self.un = float(travel_nm), float(u0), float(un)
         self.params = PiezoParameters() if params is None else params
         self.hyst = PreisachHysteresis() if hysteresis is None else hysteresis
-        self.creep = LogCreep(self.params.creep_per_decade, self.params.creep_t0_s)
+        self.creep = LogCreep(self.params.creep_per_decade, self.params.creep_t0_s) if creep is None else creep
         self.reset()
 
     def reset(self, t: float = 0.0) -> None:

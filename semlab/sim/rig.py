@@ -19,7 +19,12 @@ import numpy as np
 import pandas as pd
 
 from .manipulator import AXES, Manipulator, check_axis_name
-from .piezo import PiezoParameters, PreisachHysteresis
+from .piezo import (
+    ExponentialCreep,
+    PiezoParameters,
+    PrandtlIshlinskiiHysteresis,
+    PreisachHysteresis,
+)
 from .scene import DEFAULT_PROBE_ANGLES_DEG
 from .sem import SimulatedSEM
 
@@ -28,6 +33,8 @@ __all__ = [
     "DEFAULT_VIEW_ANGLES_DEG",
     "SimulatedMicroscope",
     "SimulatedRig",
+    "alternative_creep",
+    "alternative_hysteresis",
     "default_hysteresis",
 ]
 
@@ -39,6 +46,18 @@ DEFAULT_VIEW_ANGLES_DEG = (2.0, 182.0, 92.0, -88.0)
 #: Image displacement per unit z displacement: the column sees the stage tilted by 5 deg.
 DEFAULT_Z_VIEW = (0.0, -math.sin(math.radians(5.0)))
 _TRUTH_COLUMNS = ["frame", "t", "probe", "x", "y", "visible"]
+#: The piezo families a rig can be built with: the default Preisach/log-creep Zyvex rig, and an
+#: independently built alternative (Prandtl-Ishlinskii hysteresis with a static output nonlinearity,
+#: Kelvin-Voigt creep, a 0-150 V amplifier and 16-bit DACs on every axis).
+PIEZO_MODELS = ("preisach", "prandtl-ishlinskii")
+#: The alternative rig's amplifier range (V) and DAC resolution (every axis).
+ALTERNATIVE_VOLTS = (0.0, 150.0)
+ALTERNATIVE_DAC_BITS = 16
+#: Its creep at the default creep setting: 0.8 %, 1.2 % and 1.5 % of each step relaxing with 0.3 s, 3 s
+#: and 30 s (3.5 % in all, about what the log law's 1.5 %/decade gives between 0.1 s and 20 s).
+ALTERNATIVE_CREEP = ((0.008, 0.012, 0.015), (0.3, 3.0, 30.0))
+#: PiezoParameters' default creep per decade, against which the alternative creep is scaled.
+_DEFAULT_CREEP_PER_DECADE = PiezoParameters().creep_per_decade
 
 
 def default_hysteresis(manipulator: int, axis: str, seed: int = 0) -> PreisachHysteresis:
@@ -47,6 +66,21 @@ def default_hysteresis(manipulator: int, axis: str, seed: int = 0) -> PreisachHy
     return PreisachHysteresis(lambdas=(3.0 * rng.uniform(0.9, 1.1), 14.0 * rng.uniform(0.9, 1.1)),
                               weights=(0.45, 0.55), kappa=0.7 * rng.uniform(0.85, 1.15),
                               reversible=0.22 * rng.uniform(0.9, 1.1), nu=0.4)
+
+
+def alternative_hysteresis(manipulator: int, axis: str, seed: int = 0) -> PrandtlIshlinskiiHysteresis:
+    """The alternative rig's hysteresis of one axis, with small per-axis variations."""
+    rng = np.random.default_rng([seed, 11, manipulator, AXES.index(axis)])
+    return PrandtlIshlinskiiHysteresis(max_threshold=0.17 * rng.uniform(0.9, 1.1), decay=4.0 * rng.uniform(0.8, 1.2),
+                                       reversible=0.25 * rng.uniform(0.9, 1.1), quadratic=0.45 * rng.uniform(0.7, 1.3),
+                                       cubic=0.2 * rng.uniform(0.7, 1.3))
+
+
+def alternative_creep(params: PiezoParameters) -> ExponentialCreep:
+    """The alternative rig's creep, scaled by ``params.creep_per_decade`` (0 switches it off)."""
+    scale = params.creep_per_decade / _DEFAULT_CREEP_PER_DECADE
+    fractions, taus = ALTERNATIVE_CREEP
+    return ExponentialCreep(tuple(scale * c for c in fractions), taus)
 
 
 class SimulatedMicroscope:
@@ -85,6 +119,11 @@ class SimulatedRig:
         Pointing direction of each probe.
     piezo : PiezoParameters or None
         Lag/creep of all piezo axes.
+    piezo_model : {"preisach", "prandtl-ishlinskii"}
+        :data:`PIEZO_MODELS`: the Zyvex rig's Preisach hysteresis with log creep on 0-100 V (default),
+        or the independently built alternative: :func:`alternative_hysteresis` (PI plays and a static
+        output nonlinearity), :func:`alternative_creep` (Kelvin-Voigt relaxations), a 0-150 V amplifier
+        and 16-bit DACs on every axis.
     z_view : (float, float)
         Image displacement per unit z displacement.
     dtype : numpy dtype
@@ -94,7 +133,7 @@ class SimulatedRig:
     def __init__(self, n_manipulators=4, pixel_size_nm=66.0, seed=0, noise=None, clutter=None,
                  probe=None, width=640, height=480, frame_period=1 / 13, base_positions=None,
                  view_angles_deg=None, probe_angles_deg=None, piezo=None,
-                 z_view=DEFAULT_Z_VIEW, dtype=np.uint8, beam_sigma_px=None):
+                 z_view=DEFAULT_Z_VIEW, dtype=np.uint8, beam_sigma_px=None, piezo_model="preisach"):
         if int(n_manipulators) != n_manipulators or not 1 <= n_manipulators <= 4:
             raise ValueError(f"n_manipulators must be 1..4, got {n_manipulators!r}")
         n = int(n_manipulators)
@@ -120,8 +159,18 @@ class SimulatedRig:
             raise TypeError(f"piezo must be a PiezoParameters, got {type(piezo).__name__}")
         self.piezo = params
         self._rng = np.random.default_rng([seed, 3])
-        self._manipulators = [Manipulator(m, params, lambda i, a: default_hysteresis(i, a, seed))
-                              for m in range(n)]
+        if piezo_model not in PIEZO_MODELS:
+            raise ValueError(f"piezo_model must be one of {PIEZO_MODELS}, got {piezo_model!r}")
+        self.piezo_model = piezo_model
+        if piezo_model == "preisach":
+            self._manipulators = [Manipulator(m, params, lambda i, a: default_hysteresis(i, a, seed))
+                                  for m in range(n)]
+        else:
+            self._manipulators = [
+                Manipulator(m, params, lambda i, a: alternative_hysteresis(i, a, seed),
+                            creep_factory=lambda i, a: alternative_creep(params),
+                            nano_options={"volts": ALTERNATIVE_VOLTS, "bits": ALTERNATIVE_DAC_BITS})
+                for m in range(n)]
         self.microscope = SimulatedMicroscope(self)
         self._truth = pd.DataFrame(columns=_TRUTH_COLUMNS)
         self._log = []
