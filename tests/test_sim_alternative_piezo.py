@@ -8,7 +8,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from semlab.sim import ExponentialCreep, PiezoParameters, PrandtlIshlinskiiHysteresis, SimulatedRig
+from semlab.sim import (
+    ExponentialCreep,
+    PiezoParameters,
+    PrandtlIshlinskiiHysteresis,
+    SEMNoise,
+    SimulatedRig,
+)
 from semlab.sim.manipulator import AXES, NANO_TRAVEL_NM
 from semlab.sim.rig import alternative_hysteresis
 
@@ -141,3 +147,22 @@ def test_the_alternative_rig_creeps_and_differs_from_the_default_rig():
     assert step_alt[-1] - step_alt[0] > 0.005 * step_alt[0]
     with pytest.raises(ValueError, match="piezo_model"):
         SimulatedRig(piezo_model="preisch")
+
+
+def test_a_skewed_view_moves_the_y_axis_off_the_perpendicular():
+    piezo = PiezoParameters(creep_per_decade=0.0, hysteresis=False, position_noise_nm=0.0)
+    rig = SimulatedRig(n_manipulators=2, seed=0, piezo=piezo, view_skew_deg=(12.0, -7.0), z_view=(0.0, 0.0),
+                       noise=SEMNoise.off())  # no image drift
+    assert rig.view_skew_deg == (12.0, -7.0)
+    rig.microscope.grab()
+    p0 = rig.truth[["x", "y"]].to_numpy(float)
+    for m in range(2):
+        rig.axis(m, "y").apply(60.0)
+    rig.microscope.grab()
+    moved = rig.truth[["x", "y"]].to_numpy(float) - p0
+    for m, skew in enumerate((12.0, -7.0)):
+        expect = rig.axis(m, "y").command / 100.0 * NANO_TRAVEL_NM["y"] / rig.pixel_size_nm
+        ty = math.radians(rig.view_angles_deg[m] + 90.0 + skew)
+        np.testing.assert_allclose(moved[m], expect * np.array([math.cos(ty), math.sin(ty)]), atol=1e-6)
+    with pytest.raises(ValueError, match="view_skew_deg"):
+        SimulatedRig(view_skew_deg=(1.0, 2.0))

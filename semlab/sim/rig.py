@@ -2,10 +2,12 @@
 
 The probe of manipulator ``m`` appears in the image at::
 
-    tip_m = base_m + R(theta_m) (dx_nm, dy_nm) / pixel_size + z_view * dz_nm / pixel_size + drift
+    tip_m = base_m + (e_x dx_nm + e_y dy_nm) / pixel_size + z_view * dz_nm / pixel_size + drift
 
-where ``d*_nm`` are the displacements from home (macro offset + piezo), ``R`` is the
-view rotation of the manipulator's x/y axes in the image and ``z_view`` a small
+where ``d*_nm`` are the displacements from home (macro offset + piezo), ``e_x`` the image
+direction of the manipulator's x axis (at ``theta_m``) and ``e_y`` that of its y axis (at
+``theta_m + 90 deg + skew_m``: the axes need not look orthogonal in the view; no skew by
+default, a rotation ``R(theta_m)`` then), and ``z_view`` a small
 projection of the z axis (the column looks at the tilted stage: moving in z shifts
 the tip by ``-sin 5 deg`` of the displacement along the image's y; set
 ``z_view=(0, 0)`` for none). ``drift`` is the SEM image drift (:class:`SEMNoise`).
@@ -115,6 +117,9 @@ class SimulatedRig:
         Tip positions in px at 0 V / home; default :data:`DEFAULT_BASE_POSITIONS`.
     view_angles_deg : sequence of float or None
         Image direction of each manipulator's x axis.
+    view_skew_deg : float or sequence of float
+        How far each manipulator's y axis is from perpendicular to its x axis in the image (deg;
+        default 0: a rotated but orthogonal view).
     probe_angles_deg : sequence of float or None
         Pointing direction of each probe.
     piezo : PiezoParameters or None
@@ -133,7 +138,8 @@ class SimulatedRig:
     def __init__(self, n_manipulators=4, pixel_size_nm=66.0, seed=0, noise=None, clutter=None,
                  probe=None, width=640, height=480, frame_period=1 / 13, base_positions=None,
                  view_angles_deg=None, probe_angles_deg=None, piezo=None,
-                 z_view=DEFAULT_Z_VIEW, dtype=np.uint8, beam_sigma_px=None, piezo_model="preisach"):
+                 z_view=DEFAULT_Z_VIEW, dtype=np.uint8, beam_sigma_px=None, piezo_model="preisach",
+                 view_skew_deg=0.0):
         if int(n_manipulators) != n_manipulators or not 1 <= n_manipulators <= 4:
             raise ValueError(f"n_manipulators must be 1..4, got {n_manipulators!r}")
         n = int(n_manipulators)
@@ -148,6 +154,11 @@ class SimulatedRig:
         if self.base_positions.shape != (n, 2) or not np.all(np.isfinite(self.base_positions)):
             raise ValueError("base_positions must be finite (x, y) pairs")
         self.view_angles_deg = tuple(float(a) for a in views[:n])
+        skew = np.broadcast_to(np.asarray(view_skew_deg, float), (n,)) if np.ndim(view_skew_deg) == 0 \
+            else np.asarray(view_skew_deg, float)[:n]
+        if skew.shape != (n,) or not np.all(np.abs(skew) < 80.0):
+            raise ValueError(f"view_skew_deg must be one angle or one per manipulator, |skew| < 80 deg; got {view_skew_deg!r}")
+        self.view_skew_deg = tuple(float(a) for a in skew)
         self.z_view = np.asarray(z_view, float)
         self.sem = SimulatedSEM(width, height, pixel_size_nm, frame_period, noise=noise,
                                 clutter=clutter, probe=probe, seed=seed,
@@ -205,10 +216,12 @@ class SimulatedRig:
                 for a in AXES:
                     d[a] += sd * self._rng.standard_normal()
             th = math.radians(self.view_angles_deg[m])
-            c, s = math.cos(th), math.sin(th)
+            ty = th + math.radians(90.0 + self.view_skew_deg[m])
             px = self.pixel_size_nm
-            tips[m, 0] = self.base_positions[m, 0] + (c * d["x"] - s * d["y"]) / px + self.z_view[0] * d["z"] / px
-            tips[m, 1] = self.base_positions[m, 1] + (s * d["x"] + c * d["y"]) / px + self.z_view[1] * d["z"] / px
+            tips[m, 0] = (self.base_positions[m, 0] + (math.cos(th) * d["x"] + math.cos(ty) * d["y"]) / px
+                          + self.z_view[0] * d["z"] / px)
+            tips[m, 1] = (self.base_positions[m, 1] + (math.sin(th) * d["x"] + math.sin(ty) * d["y"]) / px
+                          + self.z_view[1] * d["z"] / px)
         return tips
 
     def _grab(self) -> np.ndarray:
