@@ -45,6 +45,7 @@ __all__ = [
     "move_to",
     "step_metrics",
     "step_response",
+    "tracked_position",
 ]
 
 RESPONSE_COLUMNS = ("frame", "t", "u", "x", "y", "displacement", "target", "ok")
@@ -283,6 +284,21 @@ def axis_reach(model, limits, *, generous: bool = False) -> tuple[float, float]:
     return out[0], out[1]
 
 
+def tracked_position(tracker, frame, index: int) -> tuple[float, float, bool]:
+    """``(x, y, ok)`` of the tracker on ``frame`` (the ``index``-th of a run).
+
+    Raises
+    ------
+    ValueError
+        If the tracker reports ``ok=True`` with a non-finite position: a servo must not drive blind.
+    """
+    x, y, _, ok = _read_result(tracker.update(frame))
+    if ok and not (math.isfinite(x) and math.isfinite(y)):
+        raise ValueError(f"tracker reported ok=True with a non-finite position ({x}, {y}) at frame {index}; "
+                         "refusing to drive blind")
+    return x, y, ok
+
+
 class AxisLoop:
     """The control law of one axis (paper, Fig. 8a): feed-forward through the hysteresis model's inverse,
     a PID on the measured displacement along the axis' image direction, and the axis' safety limits.
@@ -307,7 +323,7 @@ class AxisLoop:
     """
 
     def __init__(self, axis, model, *, frame_period: float, feedforward: bool = True, pid=None, creep=None,
-                 ki_fine: float | None = 0.25, fine_band_px: float = 0.5, ff_margin: float = 0.025,
+                 ki_fine: float | None = None, fine_band_px: float = 0.5, ff_margin: float = 0.025,
                  max_slew_v: float | None = None, max_step_px: float | None = None):
         if model is None:
             raise ValueError("a hysteresis model is required (it supplies at least direction and gain)")
@@ -509,8 +525,12 @@ class VisualServo:
         (the steps commanded during this run are recorded in it; it is reset at construction).
     ki_fine : float or None
         Gain scheduling: once the error has been within ``fine_band_px`` for two frames, the integral
-        gain drops to ``ki_fine`` (default 0.25; None: never) so the loop averages the tracker noise
-        instead of feeding it back to the probe.
+        gain drops to ``ki_fine`` (default None: never) so the loop averages the tracker noise instead
+        of feeding it back to the probe. Off by default: the creep that follows a large step then
+        pulls the probe out of the band faster than the low gain brings it back (with creep
+        compensation, on both simulated piezo families, ``benchmarks/bench_servo.py`` history: worst
+        17-22 frames to stay within +-0.5 px with 0.25 or 0.5, 3 without), while the full gain's
+        response to the tracker noise stays well inside the 0.2 px final std.
     fine_band_px : float
         See ``ki_fine``.
     ff_margin : float
@@ -530,7 +550,7 @@ class VisualServo:
 
     def __init__(self, microscope, axis, model, *, tracker=None, feedforward: bool = True, pid=None,
                  max_slew_v: float | None = None, max_step_px: float | None = None, creep=None,
-                 ki_fine: float | None = 0.25, fine_band_px: float = 0.5, ff_margin: float = 0.025,
+                 ki_fine: float | None = None, fine_band_px: float = 0.5, ff_margin: float = 0.025,
                  warmup_frames: int = 0):
         self.microscope = microscope
         self.dt = float(microscope.frame_period)
@@ -614,10 +634,7 @@ class VisualServo:
         self._u_effect, self._at_limit_effect = self.loop.u, self.loop.at_limit
         frame = self.microscope.grab()
         self.frame += 1
-        x, y, _, ok = _read_result(self.tracker.update(frame))
-        if ok and not (math.isfinite(x) and math.isfinite(y)):
-            raise ValueError(f"tracker reported ok=True with a non-finite position ({x}, {y}) at frame "
-                             f"{self.frame}; refusing to drive blind")
+        x, y, ok = tracked_position(self.tracker, frame, self.frame)
         if ok:
             self.y_meas = float((np.array([x, y]) - self.p0) @ self.direction)
         return x, y, ok

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from semlab.control import AxisLoop, _default_tracker, _read_result, _roi_centre
+from semlab.control import AxisLoop, _default_tracker, _roi_centre, tracked_position
 
 __all__ = ["POINT_COLUMNS", "PointServo", "ProbeMove", "image_jacobian", "move_probe_to", "move_probes_to",
            "point_metrics"]
@@ -161,10 +161,7 @@ class PointServo:
         command every axis, or hold them all when the tracker lost the probe. Returns the row."""
         effect = ([lp.u for lp in self.loops], any(lp.at_limit for lp in self.loops))
         self.frame += 1
-        x, y, _, ok = _read_result(self.tracker.update(frame))
-        if ok and not (math.isfinite(x) and math.isfinite(y)):
-            raise ValueError(f"tracker reported ok=True with a non-finite position ({x}, {y}) at frame "
-                             f"{self.frame}; refusing to drive blind")
+        x, y, ok = tracked_position(self.tracker, frame, self.frame)
         if ok:
             self.s_meas = self.J_inv @ (np.array([x, y]) - self.p0)
         row = self._record(x, y, ok, held=not ok, effect=effect)

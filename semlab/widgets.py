@@ -669,6 +669,10 @@ def _hide(image):
     image.value = b""
 
 
+def _servo_readout(label, parts):
+    return "<div>" + " · ".join([f"<b>{html.escape(label)}</b>", *parts]) + "</div>"
+
+
 def _plot_point_moves(moves, frame, axes):
     """(a) distance to the target against time, (b) the tracked paths in the image (servo to a point)."""
     ax_err, ax_path = axes
@@ -957,24 +961,21 @@ class ServoPanel:
 
     def _readout(self, label, m):
         f = self._fmt
-        return ("<div>" + " · ".join([
-            f"<b>{html.escape(label)}</b>",
+        return _servo_readout(label, [
             f"<b>response time (±1 px)</b> {f(m, 'response_time_1px_s', 's')}",
             f"<b>(±0.5 px)</b> {f(m, 'response_time_0p5px_s', 's')}",
             f"<b>overshoot</b> {f(m, 'overshoot_px', 'px')}",
             f"<b>final</b> {f(m, 'final_mean_px', 'px', '.3f')} ± {f(m, 'final_std_px', 'px', '.3f')}",
-            f"<b>lost frames</b> {int(m.get('n_lost', 0))}",
-        ]) + "</div>")
+            f"<b>lost frames</b> {int(m.get('n_lost', 0))}"])
 
     def _point_readout(self, label, m):
         f = self._fmt
-        return ("<div>" + " · ".join([
-            f"<b>{html.escape(label)}</b>", f"<b>distance</b> {f(m, 'distance_px', 'px', '.1f')}",
+        return _servo_readout(label, [
+            f"<b>distance</b> {f(m, 'distance_px', 'px', '.1f')}",
             f"<b>response time (±0.5 px)</b> {f(m, 'response_time_s', 's')}",
             f"<b>overshoot</b> {f(m, 'overshoot_px', 'px')}",
             f"<b>final error</b> {f(m, 'final_error_px', 'px', '.3f')} ± {f(m, 'final_std_px', 'px', '.3f')}",
-            f"<b>lost frames</b> {int(m.get('n_lost', 0))}",
-        ]) + " (measured by the tracker)</div>")
+            f"<b>lost frames</b> {int(m.get('n_lost', 0))} (measured by the tracker)"])
 
     def _draw(self):
         axes = _png_figure(1, 2, (12, 4), left=0.07, wspace=0.25)[0]

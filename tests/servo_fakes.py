@@ -82,8 +82,15 @@ class FakeStage:
 
 
 class FakeTracker:
-    def __init__(self, stage, probe, noise_px=0.0, lose=(), nan_ok=(), seed=0):
-        self.stage, self.probe, self.noise = stage, probe, noise_px
+    """Reports ``position()`` (the truth) moved onto the ROI's centre, plus optional noise; frames whose
+    index is in ``lose`` are lost, in ``nan_ok`` reported valid with a NaN position (a broken tracker).
+
+    ``FakeTracker(stage, probe)`` follows a probe of a :class:`FakeStage`; ``FakeTracker(position=f)``
+    follows any ``f() -> (x, y)``."""
+
+    def __init__(self, stage=None, probe=0, noise_px=0.0, lose=(), nan_ok=(), seed=0, *, position=None):
+        self.position = position if position is not None else (lambda: stage.position(probe))
+        self.noise = noise_px
         self.lose, self.nan_ok = set(lose), set(nan_ok)
         self.rng = np.random.default_rng(seed)
         self.updates = 0
@@ -91,7 +98,7 @@ class FakeTracker:
     def init(self, frame, roi):
         x, y, w, h = roi
         self.centre = np.array([x + (w - 1) / 2, y + (h - 1) / 2])
-        self.ref = self.stage.position(self.probe).copy()
+        self.ref = np.array(self.position(), float)
 
     def update(self, frame):
         self.updates += 1
@@ -100,7 +107,7 @@ class FakeTracker:
             return (float("nan"), float("nan"), 1.0, True)
         if k in self.lose:
             return (float("nan"), float("nan"), 0.0, False)
-        p = self.centre + self.stage.position(self.probe) - self.ref + self.rng.normal(0, self.noise, 2)
+        p = self.centre + np.array(self.position(), float) - self.ref + self.rng.normal(0, self.noise, 2)
         return (float(p[0]), float(p[1]), 1.0, True)
 
 

@@ -12,6 +12,7 @@ import math
 import numpy as np
 import pandas as pd
 import pytest
+import servo_fakes
 
 from semlab.control import PID, VisualServo, move_to, step_metrics, step_response
 from semlab.hysteresis import characterise_hysteresis, fit_hysteresis
@@ -108,27 +109,9 @@ class FakeRig:
         return self.origin + (self.disp + creep + self.macro_px) * self.d
 
 
-class FakeTracker:
-    def __init__(self, rig, noise_px=0.0, lose=(), nan_ok=(), seed=0):
-        self.rig, self.noise = rig, noise_px
-        self.lose, self.nan_ok = set(lose), set(nan_ok)
-        self.rng = np.random.default_rng(seed)
-        self.updates = 0
-
-    def init(self, frame, roi):
-        x, y, w, h = roi
-        self.centre = np.array([x + (w - 1) / 2, y + (h - 1) / 2])
-        self.ref = self.rig.position.copy()
-
-    def update(self, frame):
-        self.updates += 1
-        k = int(frame[0, 0])
-        if k in self.nan_ok:
-            return (float("nan"), float("nan"), 1.0, True)
-        if k in self.lose:
-            return (float("nan"), float("nan"), 0.0, False)
-        p = self.centre + self.rig.position - self.ref + self.rng.normal(0, self.noise, 2)
-        return (float(p[0]), float(p[1]), 1.0, True)
+def FakeTracker(rig, **kw):
+    """The fake tracker of ``servo_fakes``, reporting the fake rig's true position."""
+    return servo_fakes.FakeTracker(position=lambda: rig.position, **kw)
 
 
 ROI = (100, 100, 101, 101)

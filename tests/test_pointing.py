@@ -106,7 +106,8 @@ def test_two_axes_bring_the_tip_to_the_point(stage_at_mid, offset):
     # the measured figures of the issue: in the band within 6 frames, no overshoot, still at the end
     assert m["response_frames"] <= 6 and m["overshoot_px"] <= 0.5 and m["final_std_px"] <= 0.2
     # ground truth: the tip is where it was asked to be, within the noise averaged by the integrator
-    # (ki_fine 0.25 per frame: the commanded position's sd is ~0.4 sigma) plus a margin for its lag
+    # (an integrator of 0.8 per frame passes sqrt(0.8 / 1.2) = 0.8 sigma of it to the probe, so the
+    # mean of the last 15 frames is within ~0.1 sigma) plus the loop's lag behind the hysteresis
     assert np.hypot(*(stage.position(0) - target)) < 0.3
     # the feed-forward made both parts of the move in the first frame: within the 2.5 % margin plus
     # the PI model's error on a piezo outside its family (assuming orthogonal axes would miss by
