@@ -92,8 +92,8 @@ def _per_axis(value, n: int, name: str) -> list:
 
 class PointServo:
     """One probe servoed to a point: its tracker, one :class:`~semlab.control.AxisLoop` per axis and
-    its rows. It is fed frames from outside (:meth:`start`, then :meth:`observe` once per frame), so
-    several probes can share a frame stream.
+    its rows. It is fed frames from outside (:meth:`plan`, :meth:`start`, then :meth:`observe` once per
+    frame), so several probes can share a frame stream.
 
     Parameters
     ----------
@@ -132,26 +132,32 @@ class PointServo:
     def n_axes(self) -> int:
         return len(self.loops)
 
-    def start(self, frame, roi, target_xy) -> PointServo:
-        """Initialise the tracker on ``frame`` (frame 0) and send the first command of every axis.
+    def plan(self, roi, target_xy) -> PointServo:
+        """Check the move of the ROI's centre point to ``target_xy`` before anything moves.
 
         Raises
         ------
         ValueError
-            A NaN target, or a move some axis cannot make within its limits (nothing moves then).
+            A NaN target, or a move some axis cannot make within its limits.
         """
+        self.roi = tuple(roi)
         self.p0 = np.array(_roi_centre(roi))
         self.target = _target_point(target_xy)
-        goals = self.J_inv @ (self.target - self.p0)
-        for i, (loop, goal) in enumerate(zip(self.loops, goals)):
+        self.goals = self.J_inv @ (self.target - self.p0)
+        for i, (loop, goal) in enumerate(zip(self.loops, self.goals)):
             loop.check_reach(float(goal), 0.0, f"axis {i}'s part of the move,")
+        return self
+
+    def start(self, frame) -> PointServo:
+        """Initialise the tracker on ``frame`` (frame 0, the ROI's) and send every axis its first
+        command (:meth:`plan` first)."""
         jump = float(np.hypot(*(self.target - self.p0)))
-        self.tracker = _default_tracker(self._tracker, jump_px=jump, roi=roi)
-        self.tracker.init(frame, tuple(roi))
+        self.tracker = _default_tracker(self._tracker, jump_px=jump, roi=self.roi)
+        self.tracker.init(frame, self.roi)
         self.frame = 0
         self.s_meas = np.zeros(self.n_axes)
         self._record(*self.p0, True, held=False)
-        for loop, goal in zip(self.loops, goals):
+        for loop, goal in zip(self.loops, self.goals):
             loop.begin(float(goal), 0.0, self.frame)
             loop.act(0.0, self.frame)
         return self
@@ -261,7 +267,7 @@ def move_probe_to(microscope, actuator, roi, target_xy, *, model, n_frames=60, *
     progress = bool(params.pop("progress", False))
     servo = PointServo(axes, models, frame_period=microscope.frame_period, tracker=params.pop("tracker", None),
                        **params)
-    servo.start(microscope.grab(), roi, target_xy)
+    servo.plan(roi, target_xy).start(microscope.grab())
     for _ in _progress(range(n_frames - 1), progress, "moving the probe"):
         servo.observe(microscope.grab())
     servo.finish()
@@ -327,11 +333,11 @@ def move_probes_to(microscope, moves, *, n_frames=60, progress=False, **params) 
             raise ValueError(f"moves[{k}] drives an axis another probe drives too")
         seen |= {id(a) for a in axes}
         p = {**params, **mv.params}
-        servos.append((PointServo(axes, models, frame_period=microscope.frame_period,
-                                  tracker=p.pop("tracker", None), **p), mv))
+        servo = PointServo(axes, models, frame_period=microscope.frame_period, tracker=p.pop("tracker", None), **p)
+        servos.append((servo.plan(mv.roi, mv.target_xy), mv))
     frame = microscope.grab()
-    for servo, mv in servos:
-        servo.start(frame, mv.roi, mv.target_xy)
+    for servo, _ in servos:
+        servo.start(frame)
     for _ in _progress(range(n_frames - 1), progress, f"moving {len(servos)} probes"):
         frame = microscope.grab()
         for servo, _ in servos:

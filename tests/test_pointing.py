@@ -262,6 +262,20 @@ def test_moving_one_probe_does_not_disturb_the_loop_of_another(characterised):
     assert still["u_0"].nunique() == 1 and still["u_1"].nunique() == 1
 
 
+def test_a_move_one_probe_cannot_make_stops_every_probe_before_anything_moves(stage_at_mid):
+    stage, models = stage_at_mid
+    x_axis = stage.axes(1)[0]
+    moves = [ProbeMove(stage.axes(0), roi_at(stage, 0), tuple(stage.position(0) + 30.0), models[0]),
+             ProbeMove(stage.axes(1), roi_at(stage, 1), tuple(stage.position(1) + 500.0 * x_axis.d), models[1])]
+    for k in range(2):
+        for a in stage.axes(k):
+            a.sent.clear()
+    grabs = stage.grabs
+    with pytest.raises(ValueError, match="'probe 1 x' can reach"):
+        move_probes_to(stage, moves, n_frames=10, tracker=None)
+    assert all(a.sent == [] for k in range(2) for a in stage.axes(k)) and stage.grabs == grabs
+
+
 def test_probes_must_not_share_an_axis(stage_at_mid):
     stage, models = stage_at_mid
     moves = [ProbeMove(stage.axes(0), roi_at(stage, 0), tuple(stage.position(0)), models[0]),
