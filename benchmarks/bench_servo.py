@@ -5,7 +5,8 @@ preisach:0,prandtl-ishlinskii:1`` to choose the rigs; ``--workers 2`` rigs in pa
 measures with the simulator's ground truth instead of the visual tracker, to separate tracking error
 from control error; ``--model pi|polynomial``).
 
-Rigs: 640x480 frames at 13 Hz, 66 nm/px (3,000x), four manipulators; ``preisach:<seed>`` is the default
+Rigs: 640x480 frames at 13 Hz, 66 nm/px (3,000x), four manipulators whose y axes look 4-7 deg off the
+perpendicular to their x axes (:data:`VIEW_SKEW_DEG`); ``preisach:<seed>`` is the default
 Zyvex rig (Preisach hysteresis, log creep, 0-100 V, 16/12-bit DACs), ``prandtl-ishlinskii:<seed>`` the
 independently built alternative (PI plays with a static output nonlinearity, Kelvin-Voigt creep,
 0-150 V, 16-bit DACs): a piezo whose hysteresis is not the family either model assumes. Every axis is
@@ -13,12 +14,14 @@ characterised over a sub-range of its amplifier (the probe stays in view), as a 
 servo sees the rig only through the Microscope/Axis protocols and the visual tracker. The ground truth
 is read only here, to score.
 
-Sections, per rig
-1. 1-D 100-px steps (Fig. 9) of probe 0's x axis, with feed-forward and PID-only, from the end of the
-   characterisation and back to it, then from other points of the loop (some partly beyond the
+Sections, per rig (``--sections``)
+1. ``1d``: 1-D 100-px steps (Fig. 9) of probe 0's x axis, with feed-forward and PID-only, from the end of
+   the characterisation and back to it, then from other points of the loop (some partly beyond the
    characterised range).
-2. 2-D moves of probe 0 (x and y axes at once) to random points 20-90 px away.
-3. All four probes moved at once to random points 20-90 px away, from one frame stream.
+2. ``2d``: 2-D moves of probe 0 (x and y axes at once) to random points 20-90 px away.
+3. ``four``: all four probes moved at once to random points 20-90 px away, from one frame stream.
+4. ``ab``: 200-px A->B moves, 5x in one closed-loop run (Fig. 7), spread at B.
+5. ``macro``: a move beyond what the y piezo can reach within its limits: macro stepper, then piezo.
 
 Targets (issue 16), every move, by the ground truth: within +-0.5 px in <= 6 frames and staying,
 overshoot <= 0.5 px, final std <= 0.2 px, |final mean error| <= 0.3 px (the last 30 of 60 frames).
@@ -60,6 +63,9 @@ ROI_SIZE_FOUR = 160  # four probes: smaller, so that a neighbour's tip stays out
 #: edges so that four probes have room to move without meeting (every tip >= 70 px inside the frame:
 #: a tip at the edge, its ROI clipped, tests the tracker more than the servo).
 LAYOUT = ((90.0, 250.0), (570.0, 200.0), (300.0, 75.0), (330.0, 410.0))
+#: How far each manipulator's y axis is from perpendicular to its x axis in the view (deg): the servo must
+#: not assume orthogonal axes.
+VIEW_SKEW_DEG = (5.0, -6.0, 7.0, -4.0)
 #: Characterised sub-ranges (V) per piezo family: probe 0's x (1-D steps), every y, probes 1-3's x.
 RANGES = {
     "preisach": {"x0": (10.0, 55.0), "y": (10.0, 90.0), "x": (5.0, 25.0)},
@@ -93,7 +99,7 @@ class Bench:
 
     def __init__(self, family: str, seed: int, tracker: str, model_kind: str):
         self.family, self.seed, self.tracker_kind, self.model_kind = family, seed, tracker, model_kind
-        self.rig = SimulatedRig(seed=seed, piezo_model=family, base_positions=LAYOUT)
+        self.rig = SimulatedRig(seed=seed, piezo_model=family, base_positions=LAYOUT, view_skew_deg=VIEW_SKEW_DEG)
         self.mic = self.rig.microscope
         self.models = {}  # (probe, axis name) -> model
         self.creeps = {}  # (probe, axis name) -> CreepModel, for the feed-forward
@@ -289,6 +295,9 @@ def random_target(b, probe, roi, rng, others=()):
             continue
         if any(np.hypot(*(tip_end - o)) < MIN_SEPARATION_PX for o in others) or not inside(target):
             continue
+        x0, y0 = roi[0] + target[0] - c[0], roi[1] + target[1] - c[1]
+        if not (0 <= x0 and 0 <= y0 and x0 + roi[2] <= 640 and y0 + roi[3] <= 480):
+            continue  # the ROI must stay in the frame (the servo refuses otherwise)
         return target, tip_end
     raise RuntimeError(f"no reachable target for probe {probe}")
 
@@ -367,18 +376,73 @@ def section_four(b: Bench, n_rep):
     return pd.DataFrame(rows)
 
 
+def section_ab(b: Bench, n=5, distance=200.0, frames=25):
+    """Fig. 7 under closed loop: A -> B -> A ... of ``distance`` px along probe 0's x axis in one servo run;
+    the spread at B, tracked and true."""
+    from semlab.control import VisualServo
+
+    model = b.model(0, "x")
+    b.drive([(0, "x", model.u_range[0] + 0.1 * np.ptp(model.u_range))])
+    roi = b.roi(0)
+    f0 = b.rig.frame_index
+    servo = VisualServo(b.mic, b.axis(0, "x"), model, tracker=b.tracker(0), creep=b.creep(0, "x")).start(roi)
+    ends = []
+    for _ in range(n):
+        for target in (distance, 0.0):
+            servo.goto(target, frames)
+            if target:
+                ends.append(len(servo.rows) - 1)
+    df = servo.to_frame()
+    truth = b.truth_positions(0, f0, len(df)) @ np.asarray(model.direction)
+    at_b = df.iloc[ends]
+    true_b = (truth - truth[0])[ends]
+    return {"rig": b.rig_name, "spread at B, tracked (px)": float(at_b["displacement"].std(ddof=1)),
+            "spread at B, true (px)": float(np.std(true_b, ddof=1)),
+            "mean true error at B (px)": float(np.mean(true_b) - distance)}
+
+
+def section_macro(b: Bench, distance=-150.0):
+    """A move beyond what probe 0's y piezo can reach within its limits: the macro stepper first, in
+    tracked chunks, then the piezo (the paper's MACRO and NANO motions)."""
+    from semlab.control import move_to
+
+    model = b.model(0, "y")
+    b.drive([(0, "x", b.model(0, "x").u_range[0]), (0, "y", model.u_range[0])])  # clear of probe 2's tip
+    roi = b.roi(0)
+    p0 = b.tip(0)
+    resp = move_to(b.mic, b.axis(0, "y"), roi, distance, model=model, macro=b.rig.macro(0, "y"),
+                   pixel_size_nm=b.rig.pixel_size_nm, n_frames=30, tracker=b.tracker(0))
+    moved = float((b.tip(0) - p0) @ np.asarray(model.direction))
+    return {"rig": b.rig_name, "move (px)": distance, "macro frames": int((resp.stage == "macro").sum()),
+            "piezo frames": int((resp.stage == "nano").sum()),
+            "final tracked (px)": float(resp["displacement"].iloc[-1]), "final true (px)": moved}
+
+
+SECTIONS = ("1d", "2d", "four", "ab", "macro")
+
+
 def run_rig(spec):
-    family, seed, tracker, model_kind = spec
+    family, seed, tracker, model_kind, sections = spec
     t0 = time.time()
     b = Bench(family, seed, tracker, model_kind)
+    b.rig_name = rig = f"{family}:{seed}"
     n1, n2, n4 = (3, 3, 2) if FAST else (8, 8, 4)
-    one = section_1d(b, n1)
-    two = section_2d(b, n2)
-    four = section_four(b, n4)
-    rig = f"{family}:{seed}"
-    for df in (one, two, four):
-        df.insert(0, "rig", rig)
-    return {"rig": rig, "1d": one, "2d": two, "four": four, "frames": b.rig.frame_index, "s": time.time() - t0}
+    out = {"rig": rig}
+    if "1d" in sections or "ab" in sections:
+        out["1d"] = section_1d(b, n1 if "1d" in sections else 0)
+    if "ab" in sections:
+        out["ab"] = section_ab(b, n=3 if FAST else 5)
+    if {"2d", "four", "macro"} & set(sections):
+        out["2d"] = section_2d(b, n2 if "2d" in sections else 0)
+    if "macro" in sections:
+        out["macro"] = section_macro(b)
+    if "four" in sections:
+        out["four"] = section_four(b, n4)
+    for key in ("1d", "2d", "four"):
+        if key in out:
+            out[key].insert(0, "rig", rig)
+    out.update(frames=b.rig.frame_index, s=time.time() - t0)
+    return out
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -441,13 +505,16 @@ def main(argv=None):
     ap.add_argument("--model", choices=("pi", "polynomial"), default="pi")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--details", action="store_true", help="print every move")
+    ap.add_argument("--sections", default=",".join(SECTIONS), help=f"comma-separated, of {SECTIONS}")
     args = ap.parse_args(argv)
     specs = []
     for item in args.rigs.split(","):
         family, seed = item.split(":")
         if family not in RANGES:
             ap.error(f"unknown piezo family {family!r}; one of {sorted(RANGES)}")
-        specs.append((family, int(seed), args.tracker, args.model))
+        specs.append((family, int(seed), args.tracker, args.model, tuple(args.sections.split(","))))
+    if set(specs[0][4]) - set(SECTIONS):
+        ap.error(f"unknown section(s) {sorted(set(specs[0][4]) - set(SECTIONS))}; of {SECTIONS}")
     t0 = time.time()
     print(f"# bench_servo: rigs {args.rigs}; 640x480 @ 13 Hz, 66 nm/px; tracker: {args.tracker}; model: "
           f"{args.model}; fast mode: {FAST}; {N_FRAMES} frames per move, final figures over the last {FINAL_FRAMES}")
@@ -458,29 +525,37 @@ def main(argv=None):
             results = list(pool.map(run_rig, specs))
     else:
         results = [run_rig(s) for s in specs]
-    one = pd.concat([r["1d"] for r in results], ignore_index=True)
-    two = pd.concat([r["2d"] for r in results], ignore_index=True)
-    four = pd.concat([r["four"] for r in results], ignore_index=True)
+    tables = {k: pd.concat([r[k] for r in results if k in r], ignore_index=True)
+              for k in ("1d", "2d", "four") if any(k in r for r in results)}
+    tables = {k: v for k, v in tables.items() if len(v)}
+    names = {"1d": "1-D 100-px steps (probe 0, x axis)", "2d": "2-D moves to points 20-90 px away (probe 0)",
+             "four": "four probes moved at once, 20-90 px each"}
     with pd.option_context("display.width", 250, "display.max_columns", 40, "display.max_rows", 500):
         if args.details:
-            print("\n## 1-D steps, every step")
-            print(one[["rig", "start", "step_px", "beyond_range", *SHOW]].round(3).to_string())
-            print("\n## 2-D moves, every move")
-            print(two[["rig", "move", "offset", *SHOW]].round(3).to_string())
-            print("\n## four probes at once, every probe and round")
-            print(four[["rig", "round", "probe", "offset", *SHOW]].round(3).to_string())
-        for name, df in (("1-D 100-px steps (probe 0, x axis)", one), ("2-D moves to points 20-90 px away (probe 0)", two),
-                         ("four probes moved at once, 20-90 px each", four)):
-            print(f"\n## {name}: per rig (figures by the ground truth unless 'meas.')")
+            extra = {"1d": ["start", "step_px", "beyond_range"], "2d": ["move", "offset"], "four": ["round", "probe", "offset"]}
+            for k, df in tables.items():
+                print(f"\n## {names[k]}, every move")
+                print(df[["rig", *extra[k], *SHOW]].round(3).to_string())
+        for k, df in tables.items():
+            print(f"\n## {names[k]}: per rig (figures by the ground truth unless 'meas.')")
             print(summary(df).round(3).to_string())
-        print("\n## all rigs: moves passed by the truth (and by the tracker's reading)")
-        print(totals({"1-D": one, "2-D": two, "four probes": four}).to_string())
-        print("\n## 1-D beside the paper (+100-px steps, all rigs, by the truth)")
-        print(paper_table(one).to_string())
-        print("\n## steps back to where a characterisation ended (feed-forward)")
-        back = one[(one.start == "back to char. end") & (one["mode"] == "FF+PID")]
-        print(back[["rig", "u_start", "u_end", "beyond_range", *SHOW[1:]]].round(3).to_string())
-    verdict = {name: int(df[df["mode"] == "FF+PID"]["PASS"].all()) for name, df in (("1-D", one), ("2-D", two), ("four", four))}
+        if tables:
+            print("\n## all rigs: moves passed by the truth (and by the tracker's reading)")
+            print(totals({names[k].split(" (")[0]: df for k, df in tables.items()}).to_string())
+        if "1d" in tables:
+            one = tables["1d"]
+            print("\n## 1-D beside the paper (+100-px steps, all rigs, by the truth)")
+            print(paper_table(one).to_string())
+            print("\n## steps back to where a characterisation ended (feed-forward)")
+            back = one[(one.start == "back to char. end") & (one["mode"] == "FF+PID")]
+            print(back[["rig", "u_start", "u_end", "beyond_range", *SHOW[1:]]].round(3).to_string())
+        if any("ab" in r for r in results):
+            print("\n## A->B moves of 200 px under closed loop (Fig. 7; paper: spread at B 0.6255 px)")
+            print(pd.DataFrame([r["ab"] for r in results if "ab" in r]).set_index("rig").round(3).to_string())
+        if any("macro" in r for r in results):
+            print("\n## macro/nano hand-over: a move beyond what the y piezo reaches within its limits")
+            print(pd.DataFrame([r["macro"] for r in results if "macro" in r]).set_index("rig").round(3).to_string())
+    verdict = {names[k].split(" ")[0]: bool(df[df["mode"] == "FF+PID"]["PASS"].all()) for k, df in tables.items()}
     print("\n## verdict (feed-forward, every move on every rig): " + ", ".join(
         f"{k} {'PASS' if v else 'FAIL'}" for k, v in verdict.items()))
     per_rig = ", ".join(f"{r['rig']} {r['s']:.0f} s" for r in results)

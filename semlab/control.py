@@ -41,6 +41,7 @@ __all__ = [
     "AxisLoop",
     "VisualServo",
     "axis_reach",
+    "check_in_frame",
     "drive_voltages",
     "move_to",
     "step_metrics",
@@ -282,6 +283,19 @@ def axis_reach(model, limits, *, generous: bool = False) -> tuple[float, float]:
             y_lim = y_now + (1.0 + REACH_TOLERANCE) * (y_lim - y_now) + (REACH_SLOPE_FACTOR - 1.0) * beyond
         out.append(y_lim)
     return out[0], out[1]
+
+
+def check_in_frame(roi, shift, frame_shape, what: str = "move") -> None:
+    """Raise ValueError when the ROI moved by ``shift`` (dx, dy px) would leave a frame of
+    ``frame_shape``: the tracker's template could not follow the probe there, so the servo would
+    drive it blind (choose a smaller ROI, or a target further inside)."""
+    rows, cols = frame_shape[:2]
+    x, y, w, h = (float(v) for v in roi)
+    dx, dy = (float(v) for v in shift)
+    x0, y0 = x + dx, y + dy
+    if not (x0 >= -0.5 and y0 >= -0.5 and x0 + w <= cols + 0.5 and y0 + h <= rows + 0.5):
+        raise ValueError(f"the {what} would take the {w:.0f}x{h:.0f} ROI to ({x0:.1f}, {y0:.1f}), out of the "
+                         f"{cols}x{rows} frame: the tracker could not follow the probe there")
 
 
 def tracked_position(tracker, frame, index: int) -> tuple[float, float, bool]:
@@ -585,6 +599,7 @@ class VisualServo:
         """
         self.p0 = np.array(_roi_centre(roi))
         frame = self.microscope.grab()
+        self.frame_shape = np.shape(frame)
         self.tracker.init(frame, tuple(roi))
         self.warmup = self._warm_up(self.warmup_frames)
         self.frame = 0
@@ -761,8 +776,9 @@ def step_response(microscope, axis, roi, step_px, *, model, feedforward=True, n_
     Raises
     ------
     ValueError
-        NaN step, a step the axis limits cannot reach (:meth:`AxisLoop.check_reach`, with the reason),
-        a model fitted on another axis, or a tracker that reports a NaN position as valid.
+        NaN step, a step the axis limits cannot reach (:meth:`AxisLoop.check_reach`, with the reason) or
+        that would take the ROI out of the frame (:func:`check_in_frame`; nothing has moved then), a model
+        fitted on another axis, or a tracker that reports a NaN position as valid.
 
     Examples
     --------
@@ -786,6 +802,7 @@ def step_response(microscope, axis, roi, step_px, *, model, feedforward=True, n_
     servo = VisualServo(microscope, axis, model, feedforward=feedforward, **params)
     servo.loop.check_reach(step_px, 0.0, "step of")  # refuse an unreachable step before anything moves
     servo.start(roi)
+    check_in_frame(roi, step_px * servo.direction, servo.frame_shape, f"{step_px:.4g}-px step")
     servo.rows[0]["target"] = step_px
     servo.goto(step_px, n_frames - 1, stage="feedforward" if feedforward else "pid")
     return servo.to_frame()
@@ -830,6 +847,7 @@ def move_to(microscope, axis, roi, distance_px, *, model, macro=None, pixel_size
         except ValueError as err:
             raise ValueError(f"{err}: it is beyond the piezo; pass macro= for a macro/nano hand-over") from None
     servo.start(roi)
+    check_in_frame(roi, distance_px * servo.direction, servo.frame_shape, f"{distance_px:.4g}-px move")
     servo.rows[0]["target"] = distance_px
     if needs_macro:
         if pixel_size_nm is None:

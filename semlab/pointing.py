@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from semlab.control import AxisLoop, _default_tracker, _roi_centre, tracked_position
+from semlab.control import AxisLoop, _default_tracker, _roi_centre, check_in_frame, tracked_position
 
 __all__ = ["POINT_COLUMNS", "PointServo", "ProbeMove", "image_jacobian", "move_probe_to", "move_probes_to",
            "point_metrics"]
@@ -148,9 +148,15 @@ class PointServo:
             loop.check_reach(float(goal), 0.0, f"axis {i}'s part of the move,")
         return self
 
+    def check_frame(self, frame) -> None:
+        """Raise ValueError if the move would take the ROI out of ``frame`` (the tracker could not
+        follow the probe there)."""
+        check_in_frame(self.roi, self.target - self.p0, np.shape(frame), "move to the target")
+
     def start(self, frame) -> PointServo:
         """Initialise the tracker on ``frame`` (frame 0, the ROI's) and send every axis its first
-        command (:meth:`plan` first)."""
+        command (:meth:`plan` first; the target is checked against the frame before anything moves)."""
+        self.check_frame(frame)
         jump = float(np.hypot(*(self.target - self.p0)))
         self.tracker = _default_tracker(self._tracker, jump_px=jump, roi=self.roi)
         self.tracker.init(frame, self.roi)
@@ -250,9 +256,9 @@ def move_probe_to(microscope, actuator, roi, target_xy, *, model, n_frames=60, *
     Raises
     ------
     ValueError
-        A NaN target, a move some axis cannot make within its limits (before anything moves, with the
-        reason), nearly parallel axes, models fitted on other axes, or a tracker that reports a NaN
-        position as valid.
+        A NaN target, a move that would take the ROI out of the frame, a move some axis cannot make within
+        its limits (before anything moves, with the reason), nearly parallel axes, models fitted on other
+        axes, or a tracker that reports a NaN position as valid.
 
     Examples
     --------
@@ -336,6 +342,8 @@ def move_probes_to(microscope, moves, *, n_frames=60, progress=False, **params) 
         servo = PointServo(axes, models, frame_period=microscope.frame_period, tracker=p.pop("tracker", None), **p)
         servos.append((servo.plan(mv.roi, mv.target_xy), mv))
     frame = microscope.grab()
+    for servo, _ in servos:
+        servo.check_frame(frame)
     for servo, _ in servos:
         servo.start(frame)
     for _ in _progress(range(n_frames - 1), progress, f"moving {len(servos)} probes"):

@@ -56,7 +56,7 @@ class FakeStage:
     PROBES = (((150.0, 250.0), (300.0, 20.0), (200.0, 95.0)),
               ((500.0, 150.0), (250.0, 200.0), (220.0, 285.0)))
 
-    def __init__(self, n_probes=2, frame_shape=(4, 4)):
+    def __init__(self, n_probes=2, frame_shape=(480, 640)):
         self.frame_period = FRAME_PERIOD
         self.frame_shape = tuple(frame_shape)
         self.frame, self.grabs = -1, 0

@@ -72,6 +72,7 @@ class FakeRig:
         self.d = np.array([math.cos(th), math.sin(th)])
         self.origin = np.array(origin)
         self.u, self.pending, self.frame = 0.0, None, -1
+        self.frame_shape = (480, 640)
         self.z = self.RS.copy()  # plays after a descent to 0
         self.macro = FakeMacro(self)
         self.macro_px = 0.0
@@ -100,7 +101,7 @@ class FakeRig:
         if self.macro.pending is not None:
             self.macro_px = (self.macro.pending - 5e5) * self.macro.px_per_nm
             self.macro.pending = None
-        return np.full((4, 4), self.frame, dtype=np.int64)  # the frame 'shows' its index
+        return np.full(self.frame_shape, self.frame, dtype=np.int32)  # a frame that 'shows' its index
 
     @property
     def position(self):
@@ -505,6 +506,17 @@ def test_the_model_is_re_anchored_at_every_move_so_its_error_does_not_accumulate
     assert max(misses) < 0.06 and misses[-1] < 2 * misses[0]
 
 
+def test_a_step_out_of_the_frame_is_refused_before_anything_moves(hysteretic):
+    rig, _, model = hysteretic
+    go_to_state(rig, model, [10.0])
+    rig.axis.sent.clear()
+    # the axis could make it (300 px of its 400), but from this ROI near the right edge the probe
+    # would leave the 640x480 view
+    with pytest.raises(ValueError, match="out of the 640x480 frame"):
+        step_response(rig.microscope, rig.axis, (500, 100, 101, 101), 300.0, model=model, tracker=FakeTracker(rig))
+    assert rig.axis.sent == []
+
+
 def test_nan_target_and_nan_measurement_are_refused(hysteretic):
     rig, _, model = hysteretic
     with pytest.raises(ValueError, match="not finite"):
@@ -570,6 +582,7 @@ def test_step_metrics_on_a_constructed_response():
 
 def test_macro_nano_handover_for_a_move_beyond_the_piezo(hysteretic):
     rig, _, model = hysteretic
+    rig.frame_shape = (1200, 1200)  # a view wide enough to see the whole move
     go_to_state(rig, model, [50.0])
     p0 = rig.position.copy()
     with pytest.raises(ValueError, match="beyond the piezo; pass macro="):
@@ -580,6 +593,7 @@ def test_macro_nano_handover_for_a_move_beyond_the_piezo(hysteretic):
     assert (rig.position - p0) @ rig.d == pytest.approx(900.0, abs=0.5)
     nano = resp[resp.stage == "nano"]
     assert abs(nano["displacement"].iloc[-1] - 900.0) < 0.5
+    rig.frame_shape = (480, 640)
 
 
 def test_servo_keeps_the_model_in_step_with_the_axis(hysteretic):
