@@ -401,14 +401,16 @@ def section_ab(b: Bench, n=5, distance=200.0, frames=25):
             "mean true error at B (px)": float(np.mean(true_b) - distance)}
 
 
-def section_macro(b: Bench, distance=-150.0):
+def section_macro(b: Bench, distance=-120.0, roi_size=120):
     """A move beyond what probe 0's y piezo can reach within its limits: the macro stepper first, in
     tracked chunks, then the piezo (the paper's MACRO and NANO motions)."""
     from semlab.control import move_to
 
     model = b.model(0, "y")
     b.drive([(0, "x", b.model(0, "x").u_range[0]), (0, "y", model.u_range[0])])  # clear of probe 2's tip
-    roi = b.roi(0)
+    # a smaller ROI: the hand-over leaves the target near the middle of the piezo's reach, so the macro
+    # takes the probe past the target by half that reach, and the ROI must stay in the frame
+    roi = b.roi(0, roi_size)
     p0 = b.tip(0)
     resp = move_to(b.mic, b.axis(0, "y"), roi, distance, model=model, macro=b.rig.macro(0, "y"),
                    pixel_size_nm=b.rig.pixel_size_nm, n_frames=30, tracker=b.tracker(0))

@@ -598,6 +598,7 @@ class VisualServo:
             If the tracker has lost the probe at the end of the warm-up (nothing has moved).
         """
         self.p0 = np.array(_roi_centre(roi))
+        self.roi = tuple(roi)
         frame = self.microscope.grab()
         self.frame_shape = np.shape(frame)
         self.tracker.init(frame, tuple(roi))
@@ -691,7 +692,8 @@ class VisualServo:
 
         The macro moves in chunks of at most ``chunk_px`` so the tracker can follow; the first chunk
         measures the stepper's image gain and sign (px per nm), nothing about it is assumed except the
-        pixel size used for the first chunk's length.
+        pixel size used for the first chunk's length. A chunk that would take the ROI out of the frame
+        is not made (ValueError: the tracker could not follow).
         """
         if not (math.isfinite(pixel_size_nm) and pixel_size_nm > 0):
             raise ValueError(f"pixel_size_nm={pixel_size_nm} must be a positive number")
@@ -710,6 +712,7 @@ class VisualServo:
             dest = float(macro.position_nm) + step_px * nm_per_px
             if not m_lo <= dest <= m_hi:
                 raise ValueError(f"macro destination {dest:.6g} nm is outside its limits [{m_lo}, {m_hi}] nm")
+            check_in_frame(self.roi, (self.y_meas + step_px) * self.direction, self.frame_shape, "macro hand-over")
             y_before = self.y_meas
             macro.move_to(dest)
             ok = False
