@@ -22,6 +22,7 @@ Sections, per rig (``--sections``)
 3. ``four``: all four probes moved at once to random points 20-90 px away, from one frame stream.
 4. ``ab``: 200-px A->B moves, 5x in one closed-loop run (Fig. 7), spread at B.
 5. ``macro``: a move beyond what the y piezo can reach within its limits: macro stepper, then piezo.
+6. ``openloop``: open-loop feed-forward error of the polynomial and the PI model, large and small moves.
 
 Targets (issue 16), every move, by the ground truth: within +-0.5 px in <= 6 frames and staying,
 overshoot <= 0.5 px, final std <= 0.2 px, |final mean error| <= 0.3 px (the last 30 of 60 frames).
@@ -103,6 +104,7 @@ class Bench:
         self.mic = self.rig.microscope
         self.models = {}  # (probe, axis name) -> model
         self.creeps = {}  # (probe, axis name) -> CreepModel, for the feed-forward
+        self.chars = {}  # (probe, axis name) -> characterisation
 
     def tracker(self, probe=0):
         return TruthTracker(self.rig, probe) if self.tracker_kind == "oracle" else None
@@ -132,6 +134,7 @@ class Bench:
         char = characterise_hysteresis(self.mic, axis, self.roi(probe, size), u_min=u_range[0], u_max=u_range[1],
                                        n_steps=30, tracker=self.tracker(probe))
         model = self.models[(probe, name)] = fit_hysteresis(char, kind=self.model_kind)
+        self.chars[(probe, name)] = char
         # creep: one open-loop step of 40 % of the characterised travel from 30 % of the range, held
         # 40 frames (a log law fitted to it: the alternative rig's creep is not of that family)
         lo, hi = u_range
@@ -420,7 +423,52 @@ def section_macro(b: Bench, distance=-120.0, roi_size=120):
             "final tracked (px)": float(resp["displacement"].iloc[-1]), "final true (px)": moved}
 
 
-SECTIONS = ("1d", "2d", "four", "ab", "macro")
+def section_openloop(b: Bench, n=30, settle=2):
+    """Open-loop feed-forward through each model's inverse on probe 0's x axis, judged by the truth:
+    large moves (60-120 px) and small ones (2-10 px) in random directions, inside the characterised range;
+    the error in % of the move, ``settle`` frames after the command (creep included)."""
+    char = b.chars[(0, "x")]
+    models = {k: fit_hysteresis(char, kind=k) for k in ("polynomial", "pi")}
+    axis, d = b.axis(0, "x"), np.asarray(b.model(0, "x").direction)
+    start = b.model(0, "x").u_range[0]
+    b.drive([(0, "x", start)])  # the fitted models' state: the end of the characterisation
+    for m in models.values():
+        m.forward(axis.command)
+    rng = np.random.default_rng([b.seed, 5])
+    rows = []
+    for i in range(n):
+        lo, hi = models["pi"].displacement_range
+        size = rng.uniform(60.0, 120.0) if i % 2 == 0 else rng.uniform(2.0, 10.0)
+        y = models["pi"].state.y
+        move = size if (y + size < hi - 5 and (y - size < lo + 5 or rng.random() < 0.5)) else -size
+        for kind, m in models.items():
+            before = b.tip(0) @ d
+            axis.apply(float(np.clip(m.inverse(m.state.y + move), *axis.limits)))
+            for other in models.values():
+                other.forward(axis.command)
+            for _ in range(settle):
+                b.mic.grab()
+            rows.append({"kind": kind, "size": "large" if size > 20 else "small",
+                         "error_%": 100 * abs((b.tip(0) @ d - before) - move) / abs(move)})
+            # back where the move started, through the same model, so both models start alike
+            axis.apply(float(np.clip(m.inverse(m.state.y - move), *axis.limits)))
+            for other in models.values():
+                other.forward(axis.command)
+            for _ in range(settle):
+                b.mic.grab()
+        # then the move once more, through the PI model, to go on from there
+        axis.apply(float(np.clip(models["pi"].inverse(models["pi"].state.y + move), *axis.limits)))
+        for m in models.values():
+            m.forward(axis.command)
+        b.mic.grab()
+    df = pd.DataFrame(rows)
+    g = df.groupby(["kind", "size"])["error_%"]
+    out = pd.concat({"median %": g.median(), "p90 %": g.quantile(0.9)}, axis=1).unstack("size")
+    out.insert(0, "rig", b.rig_name)
+    return out.reset_index()
+
+
+SECTIONS = ("1d", "2d", "four", "ab", "macro", "openloop")
 
 
 def run_rig(spec):
@@ -430,8 +478,10 @@ def run_rig(spec):
     b.rig_name = rig = f"{family}:{seed}"
     n1, n2, n4 = (3, 3, 2) if FAST else (8, 8, 4)
     out = {"rig": rig}
-    if "1d" in sections or "ab" in sections:
+    if {"1d", "ab", "openloop"} & set(sections):
         out["1d"] = section_1d(b, n1 if "1d" in sections else 0)
+    if "openloop" in sections:
+        out["openloop"] = section_openloop(b, n=12 if FAST else 30)
     if "ab" in sections:
         out["ab"] = section_ab(b, n=3 if FAST else 5)
     if {"2d", "four", "macro"} & set(sections):
@@ -554,6 +604,10 @@ def main(argv=None):
         if any("ab" in r for r in results):
             print("\n## A->B moves of 200 px under closed loop (Fig. 7; paper: spread at B 0.6255 px)")
             print(pd.DataFrame([r["ab"] for r in results if "ab" in r]).set_index("rig").round(3).to_string())
+        if any("openloop" in r for r in results):
+            print("\n## open-loop feed-forward through each model (probe 0 x, by the truth, 2 frames after the command): "
+                  "error in % of the move")
+            print(pd.concat([r["openloop"] for r in results if "openloop" in r]).set_index(["rig", "kind"]).round(2).to_string())
         if any("macro" in r for r in results):
             print("\n## macro/nano hand-over: a move beyond what the y piezo reaches within its limits")
             print(pd.DataFrame([r["macro"] for r in results if "macro" in r]).set_index("rig").round(3).to_string())
