@@ -290,7 +290,7 @@ def random_target(b, probe, roi, rng, others=()):
     c = np.array([roi[0] + (roi[2] - 1) / 2, roi[1] + (roi[3] - 1) / 2])
     tip = b.tip(probe)
     inside = _reach_box(b, probe, c, tip)
-    for _ in range(2000):
+    for _ in range(500):
         d, a = rng.uniform(20.0, 90.0), rng.uniform(0, 2 * np.pi)
         target = c + d * np.array([np.cos(a), np.sin(a)])
         tip_end = tip + (target - c)
@@ -311,15 +311,22 @@ def section_2d(b: Bench, n_rep):
     mx, my = b.model(0, "x"), b.model(0, "y")
     rows = []
     for i in range(n_rep):
-        # a start inside both characterised ranges, then a target from there
-        start = [(0, "x", float(rng.uniform(*mx.u_range))), (0, "y", float(rng.uniform(*my.u_range)))]
+        # a start inside both characterised ranges from which a target can be drawn (clear of the other
+        # tips, the ROI kept in the frame), then the target
         others = [b.tip(k) for k in (1, 2, 3)]
+        for _ in range(50):
+            start = [(0, "x", float(rng.uniform(*mx.u_range))), (0, "y", float(rng.uniform(*my.u_range)))]
+            b.drive(start)
+            roi = b.roi(0)
+            try:
+                target, _ = random_target(b, 0, roi, rng, others)
+                break
+            except RuntimeError:
+                continue
+        offset = target - np.array([roi[0] + (roi[2] - 1) / 2, roi[1] + (roi[3] - 1) / 2])
         for feedforward in (True, False):
             b.drive(start)
             roi = b.roi(0)
-            if feedforward:
-                target, _ = random_target(b, 0, roi, rng, others)
-                offset = target - np.array([roi[0] + (roi[2] - 1) / 2, roi[1] + (roi[3] - 1) / 2])
             target = np.array([roi[0] + (roi[2] - 1) / 2, roi[1] + (roi[3] - 1) / 2]) + offset
             f0 = b.rig.frame_index
             resp = move_probe_to(b.mic, [b.axis(0, "x"), b.axis(0, "y")], roi, tuple(target), model=[mx, my],
@@ -345,28 +352,35 @@ def section_four(b: Bench, n_rep):
     # probe 0 lives in the lower part of its x range here, out of the way of probes 2 and 3
     x0_range = (b.model(0, "x").u_range[0], 0.5 * sum(b.model(0, "x").u_range) - 0.1 * np.ptp(b.model(0, "x").u_range))
     for i in range(n_rep):
-        for _ in range(50):  # starts whose tips are apart (the truth only sets the scene up)
+        plan = None
+        for _ in range(50):  # starts whose tips are apart and targets for all four (the truth sets the scene up)
             starts = []
             for k in range(4):
                 ux = rng.uniform(*(x0_range if k == 0 else b.model(k, "x").u_range))
                 starts += [(k, "x", float(ux)), (k, "y", float(rng.uniform(*b.model(k, "y").u_range)))]
             b.drive(starts)
             b.mic.grab()
-            if _separated([b.tip(k) for k in range(4)]):
+            if not _separated([b.tip(k) for k in range(4)]):
+                continue
+            rois = [b.roi(k, ROI_SIZE_FOUR, grab=False) for k in range(4)]
+            centres = [np.array([x + (w - 1) / 2, y + (h - 1) / 2]) for x, y, w, h in rois]
+            try:
+                plan, ends = [], []
+                for k in range(4):
+                    others = [b.tip(j) for j in range(k + 1, 4)] + ends
+                    target, tip_end = random_target(b, k, rois[k], rng, others)
+                    plan.append(target - centres[k])
+                    ends.append(tip_end)
                 break
-        plan = None
+            except RuntimeError:
+                plan = None
+        if plan is None:
+            raise RuntimeError("no four-probe scene found")
         for feedforward in (True, False):
             b.drive(starts)
             b.mic.grab()
             rois = [b.roi(k, ROI_SIZE_FOUR, grab=False) for k in range(4)]
             centres = [np.array([x + (w - 1) / 2, y + (h - 1) / 2]) for x, y, w, h in rois]
-            if plan is None:
-                plan, ends = [], []
-                for k in range(4):
-                    others = [b.tip(j) for j in range(4) if j != k] + ends
-                    target, tip_end = random_target(b, k, rois[k], rng, others)
-                    plan.append(target - centres[k])
-                    ends.append(tip_end)
             moves = [ProbeMove([b.axis(k, "x"), b.axis(k, "y")], rois[k], tuple(centres[k] + plan[k]),
                                [b.model(k, "x"), b.model(k, "y")],
                                {"tracker": b.tracker(k), "creep": [b.creep(k, "x"), b.creep(k, "y")]}) for k in range(4)]
