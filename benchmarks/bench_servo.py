@@ -478,6 +478,7 @@ def section_openloop(b: Bench, n=30, settle=2):
     df = pd.DataFrame(rows)
     g = df.groupby(["kind", "size"])["error_%"]
     out = pd.concat({"median %": g.median(), "p90 %": g.quantile(0.9)}, axis=1).unstack("size")
+    out.columns = [f"{size} moves, {stat}" for stat, size in out.columns]
     out.insert(0, "rig", b.rig_name)
     return out.reset_index()
 
