@@ -466,8 +466,9 @@ class AxisLoop:
         """Slew limit, clip into the axis limits, apply, tell the shadow model; returns the command."""
         u = min(max(u, self.u - self.max_slew_v), self.u + self.max_slew_v)
         lo, hi = self.limits
-        self.at_limit = not lo < u < hi
-        u = min(max(u, lo), hi)
+        tol = 1e-9 * (hi - lo)  # an inverse that lands on a limit up to rounding is at the limit
+        self.at_limit = not lo + tol < u < hi - tol
+        u = min(max(u, lo), hi) if not self.at_limit else (lo if u < 0.5 * (lo + hi) else hi)
         u = check_command(u, self.limits, "servo")
         self.axis.apply(u)
         held = getattr(self.axis, "command", None)  # what the DAC really holds, when the axis says

@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import copy
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
@@ -248,8 +248,8 @@ class HysteresisModel:
         ``(U0, Un)`` of the characterisation: what the model knows. Outside it the model extrapolates
         linearly (:attr:`extrapolation_slopes`); a voltage is only refused when it is not finite.
     extrapolation_slopes : (float, float)
-        px/V below ``U0`` and above ``Un``: :data:`EXTRAPOLATION_SLOPE_FACTOR` times the steepest slope
-        of the major loop.
+        px/V below ``U0`` and above ``Un`` after a long monotonic run: :data:`EXTRAPOLATION_SLOPE_FACTOR`
+        times the model's steepest slope at that end (see each model).
     """
 
     kind = "base"
@@ -265,8 +265,7 @@ class HysteresisModel:
             raise ValueError(f"direction {direction!r} must be a non-zero 2-vector")
         self.direction = tuple(d / np.hypot(*d))
         self.meta = dict(meta or {})
-        steepest = self.steepest_slope()
-        self.extrapolation_slopes = (EXTRAPOLATION_SLOPE_FACTOR * steepest,) * 2
+        self.extrapolation_slopes = self._extrapolation_slopes()
         self.state = None
         self.reset()
 
@@ -275,12 +274,11 @@ class HysteresisModel:
         raise NotImplementedError
 
     def _advance(self, state: HysteresisState, u: float) -> HysteresisState:  # pragma: no cover
-        """The state after a monotonic move to ``u``, both inside ``u_range``."""
+        """The state after a monotonic move from ``state`` to any voltage ``u``."""
         raise NotImplementedError
 
     def _inverse(self, state: HysteresisState, target: float) -> float:  # pragma: no cover - abstract
-        """Voltage in ``u_range`` whose monotonic move from ``state`` (inside the range) reaches
-        ``target``, which lies between the displacements at ``state.u`` and at the range's end."""
+        """The voltage whose monotonic move from ``state`` reaches ``target`` (any finite value)."""
         raise NotImplementedError
 
     # -- shared behaviour -----------------------------------------------------------------------
@@ -302,6 +300,10 @@ class HysteresisModel:
                   for rising in (True, False)]
         return float(max(max(slopes), self.gain))
 
+    def _extrapolation_slopes(self) -> tuple[float, float]:
+        slope = EXTRAPOLATION_SLOPE_FACTOR * self.steepest_slope()
+        return (slope, slope)
+
     def reset(self, u: float | None = None, branch: str = "ascending") -> HysteresisState:
         """Forget all reversals and put the model on a major branch.
 
@@ -309,16 +311,14 @@ class HysteresisModel:
         ----------
         u : float, optional
             Voltage; default ``U0`` (the state after a descent to U0, as after a characterisation).
-            Outside the range the model sits on its extrapolation, with its memory wiped out.
+            Outside the range the model sits on its extrapolation.
         branch : {"ascending", "descending"}
             Major branch the actuator is on (how ``u`` was approached).
         """
         if branch not in ("ascending", "descending"):
             raise ValueError(f"branch must be 'ascending' or 'descending', got {branch!r}")
         u = self.u_range[0] if u is None else self._check_u(u)
-        rising = branch == "ascending"
-        inside = self._major_state(self._clip(u), rising)
-        self.state = self._outside(inside, u, rising)
+        self.state = self._major_state(u, branch == "ascending")
         return self.state
 
     def _major_state(self, u: float, rising: bool) -> HysteresisState:
@@ -327,59 +327,30 @@ class HysteresisModel:
     def _check_u(self, u) -> float:
         return as_finite(u, "voltage")
 
-    def _clip(self, u: float) -> float:
-        return min(max(u, self.u_range[0]), self.u_range[1])
-
-    def _extrapolated(self, u: float) -> float:
-        """Displacement added beyond the characterised range (0 inside it)."""
-        lo, hi = self.u_range
-        if u > hi:
-            return self.extrapolation_slopes[1] * (u - hi)
-        if u < lo:
-            return self.extrapolation_slopes[0] * (u - lo)
-        return 0.0
-
-    def _inside(self, state: HysteresisState) -> HysteresisState:
-        """The state of the characterised model at the range's end nearest to ``state``."""
-        if self.u_range[0] <= state.u <= self.u_range[1]:
-            return state
-        return replace(state, u=self._clip(state.u), y=state.y - self._extrapolated(state.u))
-
-    def _outside(self, inside: HysteresisState, u: float, rising: bool) -> HysteresisState:
-        if self.u_range[0] <= u <= self.u_range[1]:
-            return inside
-        return replace(inside, u=u, y=inside.y + self._extrapolated(u), rising=rising)
-
-    def _step(self, state: HysteresisState, u: float) -> HysteresisState:
-        """A monotonic move from ``state`` to any voltage ``u``: the characterised model over the part
-        inside the range, the extrapolation beyond it."""
-        rising = state.rising if u == state.u else u > state.u
-        inside = self._advance(self._inside(state), self._clip(u))
-        return self._outside(inside, u, rising)
-
     def forward(self, voltages) -> np.ndarray | float:
         """Commit voltage(s) in order and return the displacement(s) they produce (px).
 
         The memory (reversal points / play states) is updated, so a model used as the shadow of an
-        axis must see every command sent to that axis. Voltages outside ``u_range`` are extrapolated.
+        axis must see every command sent to that axis. Voltages outside ``u_range`` are extrapolated,
+        and the memory keeps their reversals too (an excursion beyond the range is remembered).
         """
         scalar = np.ndim(voltages) == 0
         out = []
         for u in np.atleast_1d(np.asarray(voltages, dtype=float)):
-            self.state = self._step(self.state, self._check_u(u))
+            self.state = self._advance(self.state, self._check_u(u))
             out.append(self.state.y)
         return out[0] if scalar else np.asarray(out)
 
     def displacement(self, u: float) -> float:
         """Displacement a move from the current state to ``u`` would produce, without committing it."""
-        return self._step(copy.deepcopy(self.state), self._check_u(u)).y
+        return self._advance(copy.deepcopy(self.state), self._check_u(u)).y
 
     def inverse(self, target: float) -> float:
         """Voltage that brings the displacement to ``target`` from the current state (not committed).
 
         Inside the characterised range the model's own inverse (eq. 11 by Newton-Raphson, or the
-        analytic inverse PI operator); beyond it the linear extrapolation. Every finite target has an
-        answer: whether the axis can apply it is for the caller to check against the axis limits.
+        analytic inverse PI operator); beyond it the extrapolation. Every finite target has an answer:
+        whether the axis can apply it is for the caller to check against the axis limits.
 
         Raises
         ------
@@ -387,30 +358,10 @@ class HysteresisModel:
             If the target is not finite.
         """
         y_t = as_finite(target, "target displacement")
-        st = self.state
         lo_y, hi_y = self.displacement_range
-        tol = 1e-9 * max(1.0, hi_y - lo_y)  # rounding
-        if abs(y_t - st.y) <= tol:
-            return st.u
-        rising = y_t > st.y
-        lo, hi = self.u_range
-        inside = self._inside(st)
-        edge = hi if rising else lo
-        slope = self.extrapolation_slopes[1 if rising else 0]
-        beyond = st.u >= hi if rising else st.u <= lo
-        if beyond:  # further out along the extrapolation
-            return edge + (y_t - inside.y) / slope
-        entry = lo if rising else hi  # coming back from beyond the other end: the line first
-        if (st.u < lo and rising) or (st.u > hi and not rising):
-            y_entry = inside.y
-            if (y_t <= y_entry) if rising else (y_t >= y_entry):
-                return entry + (y_t - y_entry) / self.extrapolation_slopes[0 if rising else 1]
-        y_edge = self._advance(copy.deepcopy(inside), edge).y
-        if abs(y_t - y_edge) <= tol:
-            return edge
-        if (y_t >= y_edge) if rising else (y_t <= y_edge):
-            return edge + (y_t - y_edge) / slope
-        return self._inverse(inside, y_t)
+        if abs(y_t - self.state.y) <= 1e-12 * max(1.0, hi_y - lo_y):  # rounding
+            return self.state.u
+        return self._inverse(self.state, y_t)
 
     def predict(self, voltages, *, reset: bool | tuple = True) -> np.ndarray:
         """Displacements for a voltage sequence, on a copy of the model (the model is untouched).
@@ -560,11 +511,17 @@ class PolynomialHysteresis(HysteresisModel):
 
     Notes
     -----
-    Memory follows the wiping-out rule: every reversal inside the range is pushed on a stack; a curve
-    starting at the newest reversal point heads for the previous one (or the end of the major loop),
-    and passing it closes that inner loop, whose two points are forgotten. At the ends of the range all
-    memory is wiped out. The inverse solves the monotonic path from the current state by Newton-Raphson
-    on the (analytic) derivative of the active curve.
+    Memory follows the wiping-out rule: every reversal is pushed on a stack; a curve starting at the
+    newest reversal point heads for the previous one (or the end of the major loop), and passing it
+    closes that inner loop, whose two points are forgotten; passing an end of the major loop wipes out
+    all memory. The inverse solves the monotonic path from the current state by Newton-Raphson on the
+    (analytic) derivative of the active curve.
+
+    Beyond the characterised range both major branches continue as one straight line
+    (:attr:`extrapolation_slopes`, :data:`EXTRAPOLATION_SLOPE_FACTOR` times the loop's steepest slope),
+    and a reversal out there is remembered like any other: the curve back from an excursion to
+    ``u_p > Un`` is the descending branch scaled into the box from ``(u_p, y_p)`` to ``(U0, Pn(U0))``
+    (eq. 11 generalised), so it starts as flat as the descending branch does at ``Un``.
     """
 
     kind = "polynomial"
@@ -590,8 +547,17 @@ class PolynomialHysteresis(HysteresisModel):
         s = (np.asarray(u, dtype=float) - self._u0) / (self._un - self._u0)
         return self._D(s) if not deriv else self._dD(s) / (self._un - self._u0)
 
-    def _major(self, u, rising):
-        return float(self.ascending(u) if rising else self.descending(u))
+    def _major(self, u, rising, derivative=False):
+        """The major branch, continued by the straight line beyond the range (both branches meet at
+        the ends, so the line is the same for both)."""
+        U0, Un = self.u_range
+        if U0 <= u <= Un:
+            y = float(self.ascending(u) if rising else self.descending(u))
+            dy = float(self.ascending(u, deriv=1) if rising else self.descending(u, deriv=1))
+        else:
+            end, slope = (Un, self.extrapolation_slopes[1]) if u > Un else (U0, self.extrapolation_slopes[0])
+            y, dy = float(self.ascending(end)) + slope * (u - end), slope
+        return (y, dy) if derivative else y
 
     def _ends(self):
         U0, Un = self.u_range
@@ -610,60 +576,58 @@ class PolynomialHysteresis(HysteresisModel):
         return origin, end
 
     def _eval(self, origin, end, u, derivative=False):
-        if origin[0] == self.u_range[0] and end[0] == self.u_range[1]:
-            y = float(self.ascending(u))  # exactly Pn on the major branch
-            return (y, float(self.ascending(u, deriv=1))) if derivative else y
-        if origin[0] == self.u_range[1] and end[0] == self.u_range[0]:
-            y = float(self.descending(u))
-            return (y, float(self.descending(u, deriv=1))) if derivative else y
+        low, high = self._ends()
+        if (origin, end) in ((low, high), (high, low)):  # a major branch (continued beyond the range)
+            return self._major(u, end == high, derivative=derivative)
         return inner_loop_displacement(
             u, origin, end, self.ascending, self.descending, self.u_range, derivative=derivative
         )
 
+    def _active(self, state, rising, goes_past):
+        """The reversal stack for a move in direction ``rising`` from ``state``, with the inner loops
+        the move closes (``goes_past(point)``) forgotten; also the voltage the active curve starts from."""
+        stack = list(state.reversals)
+        if rising != state.rising:
+            # a reversal is remembered, inside the range or beyond (at an end of the major loop with
+            # nothing else remembered it is harmless: the curve from it is the major branch)
+            stack.append((state.u, state.y))
+        start = (state.u, state.y)
+        while len(stack) >= 2 and goes_past(stack[-2]):
+            start = stack[-2]
+            del stack[-2:]  # wiping-out: passing the closure point forgets the inner loop
+        return stack, start
+
     def _advance(self, state, u):
         U0, Un = self.u_range
-        tol = 1e-12 * (Un - U0)
-        if abs(u - state.u) <= tol:  # below the model's resolution: no move, no reversal
+        if abs(u - state.u) <= 1e-12 * (Un - U0):  # below the model's resolution: no move, no reversal
             return state
         rising = u > state.u
-        stack = list(state.reversals)
-        if rising != state.rising and U0 + tol < state.u < Un - tol:
-            stack.append((state.u, state.y))  # a reversal inside the range is remembered
-        # wiping-out: passing the closure point forgets the inner loop
-        while len(stack) >= 2 and ((rising and u >= stack[-2][0]) or (not rising and u <= stack[-2][0])):
-            del stack[-2:]
-        if u <= U0 + tol or u >= Un - tol:  # at the ends of the range all memory is wiped out
-            stack = []
-            y = self._major(u, rising)
-        else:
-            origin, end = self._curve(stack, rising)
-            y = self._eval(origin, end, u)
-        return HysteresisState(u=u, y=float(y), rising=rising, reversals=stack)
+        stack, _ = self._active(state, rising, lambda p: (u >= p[0]) if rising else (u <= p[0]))
+        origin, end = self._curve(stack, rising)
+        tol = 1e-12 * (Un - U0)
+        if len(stack) <= 1 and ((u >= end[0] - tol) if rising else (u <= end[0] + tol)):
+            # past the end of the major loop (or of the curve heading there): all memory wiped out
+            return HysteresisState(u=u, y=self._major(u, rising), rising=rising, reversals=[])
+        return HysteresisState(u=u, y=float(self._eval(origin, end, u)), rising=rising, reversals=stack)
 
     def _inverse(self, st, y_t: float) -> float:
         """The voltage whose monotonic move from ``st`` reaches ``y_t``: the path is followed curve by
         curve (closing inner loops on the way) and the curve that contains the target is solved by
-        Newton-Raphson (the paper's inverse)."""
+        Newton-Raphson (the paper's inverse); past the major loop's end, the straight line."""
         rising = y_t > st.y
         U0, Un = self.u_range
-        stack = list(st.reversals)
-        if rising != st.rising and U0 + 1e-12 * (Un - U0) < st.u < Un - 1e-12 * (Un - U0):
-            stack.append((st.u, st.y))
-        u_from = st.u
-        xtol = 1e-10 * (Un - U0)
-        while True:
-            # close inner loops whose closure point lies before the target
-            if len(stack) >= 2:
-                end = stack[-2]
-                if (rising and y_t >= end[1]) or (not rising and y_t <= end[1]):
-                    u_from = end[0]
-                    del stack[-2:]
-                    continue
-            origin, end = self._curve(stack, rising)
-            break
+        stack, (u_from, y_from) = self._active(st, rising, lambda p: (y_t >= p[1]) if rising else (y_t <= p[1]))
+        origin, end = self._curve(stack, rising)
+        if len(stack) <= 1 and ((y_t >= end[1]) if rising else (y_t <= end[1])):
+            edge, slope = (Un, self.extrapolation_slopes[1]) if rising else (U0, self.extrapolation_slopes[0])
+            if not stack and ((u_from > Un) if rising else (u_from < U0)):
+                return u_from + (y_t - y_from) / slope  # the move starts out on the line already
+            return edge + (y_t - float(self.ascending(edge))) / slope
+
         def f(x):
             return self._eval(origin, end, x, derivative=True)
 
+        xtol = 1e-10 * (Un - U0)
         if rising:
             return _newton_bisect(f, u_from, end[0], y_t, xtol=xtol)
         return _newton_bisect(f, end[0], u_from, y_t, xtol=xtol)
@@ -678,7 +642,9 @@ class PIHysteresis(HysteresisModel):
     :math:`r_i = i/(2n)` (the range of ``v`` is [0, 1]), non-negative weights (``w_0 > 0``), and an
     optional monotonic input shaping :math:`\\varphi(s) = s + a\\,s(1-s)` (``|a| < 1``) that lets the
     otherwise point-symmetric PI loop lean like a real piezo loop; :math:`\\varphi` has a closed-form
-    inverse, so the whole inverse stays analytic.
+    inverse, so the whole inverse stays analytic. Beyond the characterised range :math:`\\varphi` goes on
+    as a straight line (:data:`EXTRAPOLATION_SLOPE_FACTOR` times its slope at that end) and the plays
+    simply follow it: an excursion beyond the range is remembered like any other history.
 
     The inverse PI operator (Krejci & Kuhnen 2001) has thresholds
     :math:`r'_i = \\sum_{j\\le i} w_j (r_i - r_j)`, weights :math:`w'_0 = 1/w_0`,
@@ -717,16 +683,32 @@ class PIHysteresis(HysteresisModel):
 
     # input shaping -------------------------------------------------------------------------------
     def _v(self, u):
+        """The shaped input; beyond [0, 1] a straight line :data:`EXTRAPOLATION_SLOPE_FACTOR` times as
+        steep as the shaping at that end, so the plays (and the memory) run on beyond the range."""
         s = (np.asarray(u, dtype=float) - self.u_range[0]) / (self.u_range[1] - self.u_range[0])
-        return s + self.shape * s * (1.0 - s)
+        a, k = self.shape, EXTRAPOLATION_SLOPE_FACTOR
+        inside = np.clip(s, 0.0, 1.0)
+        v = inside + a * inside * (1.0 - inside)
+        return v + np.where(s > 1.0, k * (1.0 - a) * (s - 1.0), 0.0) + np.where(s < 0.0, k * (1.0 + a) * s, 0.0)
 
     def _u(self, v):
-        a = self.shape
-        v = min(max(float(v), 0.0), 1.0)
-        # the root in [0, 1] of a s^2 - (1 + a) s + v = 0, in the form without cancellation
-        s = 2.0 * v / ((1.0 + a) + math.sqrt(max((1.0 + a) ** 2 - 4.0 * a * v, 0.0)))
-        s = min(max(s, 0.0), 1.0)
+        a, k = self.shape, EXTRAPOLATION_SLOPE_FACTOR
+        v = float(v)
+        if v > 1.0:
+            s = 1.0 + (v - 1.0) / (k * (1.0 - a))
+        elif v < 0.0:
+            s = v / (k * (1.0 + a))
+        else:
+            # the root in [0, 1] of a s^2 - (1 + a) s + v = 0, in the form without cancellation
+            s = 2.0 * v / ((1.0 + a) + math.sqrt(max((1.0 + a) ** 2 - 4.0 * a * v, 0.0)))
+            s = min(max(s, 0.0), 1.0)
         return self.u_range[0] + s * (self.u_range[1] - self.u_range[0])
+
+    def _extrapolation_slopes(self) -> tuple[float, float]:
+        # a long monotonic run beyond an end moves every play: sum(w) times the line's slope in v
+        span = self.u_range[1] - self.u_range[0]
+        k, a, total = EXTRAPOLATION_SLOPE_FACTOR, self.shape, float(np.sum(self.weights))
+        return (k * total * (1.0 + a) / span, k * total * (1.0 - a) / span)
 
     # states ------------------------------------------------------------------------------------
     def _output(self, z):

@@ -339,8 +339,13 @@ def test_beyond_the_characterised_range_the_model_extrapolates_linearly(kind):
     np.testing.assert_allclose(model.predict([UN, UN + 10.0], reset=True), [y_top, y_top + 10.0 * s_hi])
     y_low = model.predict([UN, U0 - 4.0], reset=True)[-1]
     assert y_low == pytest.approx(model._major(U0, False) - 4.0 * s_lo)
-    # passing an end wipes the memory out, as reaching it does: back inside on the major branch
-    assert model.predict([40.0, 70.0, 30.0, UN + 5.0, 50.0])[-1] == pytest.approx(model._major(50.0, False))
+    # an excursion beyond the range is remembered: the way back starts from it as flat as a descending
+    # branch starts, not down the straight line it went up by ...
+    up = model.predict([UN + 10.0], reset=True)[-1]
+    back = model.predict([UN + 10.0, UN + 8.0], reset=True)[-1]
+    assert 0.0 < up - back < 0.5 * 2.0 * s_hi
+    # ... and the loop it opens closes when the voltage passes the excursion again (return-point memory)
+    assert model.predict([UN + 10.0, 60.0, UN + 12.0], reset=True)[-1] == pytest.approx(up + 2.0 * s_hi)
     with pytest.raises(ValueError, match="finite|not a number"):
         model.inverse(float("nan"))
     with pytest.raises(ValueError, match="finite|not a number"):
@@ -380,6 +385,24 @@ def test_feedforward_beyond_the_range_stops_short_of_an_independent_piezo():
         u = model.inverse(model.state.y + goal - start)
         reached = true_piezo([*volts, u])[-1] - y[0]
         assert 60.0 < u < 75.0 and start < reached <= goal
+
+
+def test_after_an_excursion_beyond_the_range_the_feedforward_still_stops_short():
+    # characterised over 0-60 V; the axis goes to 85 V and back to 50 V, then a 91-px move down: a model
+    # that forgot the excursion (on the major branch from 60 V) would overshoot; one that remembers it
+    # stops short, the feedback's side (the polynomial 13 %, PI 5 % here)
+    plan = characterisation_voltages(0.0, 60.0, 30)
+    y = true_piezo(plan["u"].to_numpy())
+    char = plan.assign(displacement=y - y[0], ok=True)
+    char.attrs.update(axis="m0.x", direction=(1.0, 0.0), u_min=0.0, u_max=60.0)
+    history = [*plan["u"], 85.0, 50.0]
+    start, goal = true_piezo(history)[-1], true_piezo([*history, 20.0])[-1]
+    for kind, worst in (("polynomial", 0.2), ("pi", 0.1)):
+        model = fit_hysteresis(char, kind=kind)
+        model.forward([85.0, 50.0])
+        u = model.inverse(model.state.y + goal - start)
+        reached = true_piezo([*history, u])[-1]
+        assert goal < reached < start and (reached - goal) / (start - goal) < worst, kind
 
 
 def test_model_from_another_axis_is_refused():
