@@ -76,6 +76,9 @@ RANGES = {
 #: a 160-px ROI (its half-diagonal is 113 px).
 MIN_SEPARATION_PX = 120.0
 FRAME_MARGIN_PX = 40.0  # targets stay this far inside the frame
+#: ... and the ROI moved with the probe this far: the PID-only run of a scene starts a few px from where
+#: the feed-forward run did (its ROI is cut around the tip again), with the same offset.
+ROI_FRAME_MARGIN_PX = 8.0
 
 
 class TruthTracker:
@@ -310,7 +313,8 @@ def random_target(b, probe, roi, rng, others=()):
         if any(np.hypot(*(tip_end - o)) < MIN_SEPARATION_PX for o in others) or not inside(target):
             continue
         x0, y0 = roi[0] + target[0] - c[0], roi[1] + target[1] - c[1]
-        if not (0 <= x0 and 0 <= y0 and x0 + roi[2] <= 640 and y0 + roi[3] <= 480):
+        m = ROI_FRAME_MARGIN_PX
+        if not (m <= x0 and m <= y0 and x0 + roi[2] <= 640 - m and y0 + roi[3] <= 480 - m):
             continue  # the ROI must stay in the frame (the servo refuses otherwise)
         return target, tip_end
     raise RuntimeError(f"no reachable target for probe {probe}")
