@@ -98,3 +98,25 @@ def check_command(volts: float, limits: tuple[float, float], name: str = "axis")
     if not lo <= value <= hi:
         raise ValueError(f"{name}: command {value:.6g} V is outside the axis limits [{lo:.6g}, {hi:.6g}] V")
     return value
+
+
+@runtime_checkable
+class VisualTracker(Protocol):
+    """Measures where the target is in each frame: what the experiments and the visual servo read.
+
+    :class:`semlab.tracking.Tracker`, the :mod:`semlab.peers` trackers and anything with these two
+    methods. ``update`` returns an object with ``x``, ``y``, ``ok`` (and ``score``) attributes,
+    such as :class:`semlab.tracking.TrackResult`, or a tuple ``(x, y, score, ok)``
+    (:func:`semlab.measure.read_result` reads either).
+    """
+
+    def init(self, frame: np.ndarray, roi) -> object:
+        """Take the target from ``frame`` inside ``roi = (x, y, w, h)``."""
+        ...
+
+    def update(self, frame: np.ndarray) -> object:
+        """Locate the target in the next frame (never raising for a lost one: ``ok`` is False)."""
+        ...
+
+
+__all__ += ["VisualTracker"]
