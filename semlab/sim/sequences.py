@@ -69,8 +69,8 @@ class Sequence:
         estimate in ``roi`` (:func:`semlab.sim.translation_crb`), computed for FRAME 0
         (the probe at rest where the ROI was taken). When the probe moves, later frames
         see the same probe over another patch of background: the bound of the ROI moved
-        with the probe differs slightly (along the default sweep, seed 0: 1.00-1.13 x
-        frame 0's in x; the probe's edges carry most of the information).
+        with the probe differs slightly (the probe's edges carry most of the information;
+        ``benchmarks/bench_tracking.py`` states by how much along the default sweep).
     meta : dict
         ``kind``, ``seed``, ``pixel_size_nm``, ``frame_period``, ``noise``, ``clutter``
         (parameter dicts), ``motion`` (``"still"``, ``"steps"`` for ``"moves_200px"``,

@@ -19,18 +19,11 @@ Methods
     sample, a brightness jump), a masked normalised correlation of the object's neighbourhood
     over the whole search window — blind to gain and offset — re-acquires it if its peak stands
     out, and Gauss–Newton restarts from there.
-``"contour"`` (the default of :func:`track`, as the contract fixes it)
-    The paper's method: in a 300×300 window around the last position, Gaussian smoothing and
-    adaptive-threshold Canny (eq. 10), the contour-template match (score from the template's
-    contour pixels only), then one step of the gradient sub-pixel method (eq. 9) on the contour
-    band.
-``"ssd"``
-    The conventional baseline the paper improves on: full-template SSD (eq. 2) at integer
-    positions (``subpixel=True`` adds one step of eq. 9 on the whole template).
-``"hb"``
-    The paper's parametric SSD tracker (eqs. 2-5, Hager & Belhumeur 1998): integer SSD, then the
-    increment ``Δμ = −(M₀ᵀM₀)⁻¹M₀ᵀ[I(f(R; μ), tₙ) − I(R, t₀)]`` with the offline matrix ``M₀``
-    iterated to convergence on the whole template.
+``"contour"`` (the default of :func:`track`, as the contract fixes it), ``"ssd"``, ``"hb"``
+    The paper's method (adaptive-threshold Canny, eq. 10, the contour-template match, one step of
+    eq. 9 on the contour band), the conventional full-template SSD at integer positions (eq. 2)
+    that it improves on, and its parametric SSD tracker (eqs. 2-5, Hager & Belhumeur 1998): see
+    :mod:`semlab.tracking.paper`.
 
 A lost target (occlusion, the probe leaving the window, contact, an unusable frame) never
 raises: the row says ``ok=False`` with NaN position and a low score, and the next frame is

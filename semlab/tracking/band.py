@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 from skimage.restoration import denoise_nl_means
 
-from ..subpixel import NoiseModel, five_point_gradients, gauss_newton_setup, whiten_lines
+from ..subpixel import MAD_TO_SD, NoiseModel, five_point_gradients, gauss_newton_setup, whiten_lines
 from ..template import ContourTemplate
 from .options import BandOptions, TrackerOptions
 
@@ -44,9 +44,9 @@ DEFAULT_BAND_PX = 3
 #: How far (px) the "ic" band reaches into a textured background (:func:`band_widths`).
 NARROW_BAND_PX = 2
 #: Background texture over noise (standard deviations) from which the "ic" band reaches only
-#: :data:`NARROW_BAND_PX` into the background (:func:`band_widths`). Between the simulator's
-#: textured substrate and a flat background under noise (measured on frame 0 of several seeds in
-#: ``benchmarks/bench_tracking_seeds.py``'s scenes; the noise model's estimate is a few % low).
+#: :data:`NARROW_BAND_PX` into the background (:func:`band_widths`): between what frame 0 of the
+#: simulator's textured substrate measures (about half the noise and more, at standard dose) and a
+#: flat background (a quarter of it at most, the noise model's estimate being a few % low).
 NARROW_BAND_TEXTURE = 0.4
 #: The "ic" Jacobian is denoised (``jacobian_denoise``) once the template averages this many frames:
 #: averaged over fewer, a low-dose template is too noisy for NL-means' patch similarity to mean anything.
@@ -67,8 +67,6 @@ MIN_CORE_PIXELS = 5
 TEXTURE_DISTANCE_PX = 4.0
 TEXTURE_BORDER_PX = 3
 MIN_TEXTURE_PIXELS = 50
-#: Robust standard deviation from the median absolute deviation (Gaussian noise).
-MAD_TO_SD = 1.4826
 #: The Jacobian's smoothing (px) is this many times the template's noise over its contrast,
 #: clipped to ``[jacobian_sigma, jacobian_sigma_first]``: a noisy template needs a smoother one.
 JACOBIAN_SIGMA_PER_NOISE = 5.0
