@@ -116,8 +116,10 @@ def keys_weights(t) -> np.ndarray:
         ``(4,)`` for one offset, ``(4, K)`` for ``K`` offsets: the weights of the samples at
         ``−1, 0, 1, 2`` px from the offset's integer part.
     """
+    # One offset on Python floats (the per-iteration hot path: numpy scalars cost ten times more).
+    t = float(t) if np.ndim(t) == 0 else np.asarray(t, np.float64)
     t2, t3 = t * t, t * t * t
-    return np.stack([-0.5 * t3 + t2 - 0.5 * t,
+    return np.array([-0.5 * t3 + t2 - 0.5 * t,
                      1.5 * t3 - 2.5 * t2 + 1.0,
                      -1.5 * t3 + 2.0 * t2 + 0.5 * t,
                      0.5 * t3 - 0.5 * t2])
