@@ -29,6 +29,8 @@ import time
 import numpy as np
 import pandas as pd
 
+from .roi import roi_centre
+
 __all__ = ["LOSS_PX", "run_tracker", "summarise_errors", "summarize_errors", "tracking_errors"]
 
 #: An error above this many px counts as a lost target (the issue's loss criterion).
@@ -66,8 +68,7 @@ def tracking_errors(result: pd.DataFrame, truth: pd.DataFrame, roi) -> pd.DataFr
     if len(missing):
         raise ValueError(f"no ground truth for frames {list(missing[:5])}")
     tru = tru.loc[res.index]
-    cx = roi[0] + (roi[2] - 1) / 2.0
-    cy = roi[1] + (roi[3] - 1) / 2.0
+    cx, cy = roi_centre(roi)
     x0, y0 = float(tru.loc[0, "x"]), float(tru.loc[0, "y"])
     ex = (res["x"].to_numpy(float) - cx) - (tru["x"].to_numpy(float) - x0)
     ey = (res["y"].to_numpy(float) - cy) - (tru["y"].to_numpy(float) - y0)

@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from ..roi import clip_window
 from .crb import translation_crb
 from .noise import SEMNoise
 from .rig import SimulatedRig, default_hysteresis
@@ -361,8 +362,4 @@ def _roi_around(tip, roi_size, sem):
     if not (0 <= tx <= sem.width - 1 and 0 <= ty <= sem.height - 1):
         raise ValueError(f"probe 0's tip ({tx:.1f}, {ty:.1f}) px is off the {sem.width}x{sem.height} "
                          "frame in frame 0; check base_positions")
-    rx = round(tx - (roi_size - 1) / 2)
-    ry = round(ty - (roi_size - 1) / 2)
-    rx = min(max(rx, 0), sem.width - roi_size)
-    ry = min(max(ry, 0), sem.height - roi_size)
-    return (rx, ry, roi_size, roi_size)
+    return clip_window(tx, ty, roi_size, roi_size, (sem.height, sem.width))
