@@ -96,6 +96,10 @@ def test_tracker_signature_keeps_the_contract():
     keywords = {name: p.default for name, p in params.items() if name != "method"}
     assert keywords == CONTRACT
     assert all(params[name].kind is inspect.Parameter.KEYWORD_ONLY for name in CONTRACT)
+    import typing
+
+    hints = typing.get_type_hints(Tracker.__init__)  # the CLI checks --param types against these
+    assert hints["search_size"] is int and hints["band_px"] == (int | None) and hints["photometry"] is str
     assert Tracker(method="contour", **CONTRACT).options.contour.subpixel is True  # every keyword accepted
 
 

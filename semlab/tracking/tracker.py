@@ -293,8 +293,12 @@ class Tracker:
         return TrackResult(float(x), float(y), float(score), True)
 
 
+# The contract's keywords, defaults and annotations, as inspect.signature and typing.get_type_hints
+# of Tracker.__init__ show them (the options themselves arrive as **options).
 Tracker.__init__.__signature__ = TrackerOptions.signature(
     inspect.Parameter("self", inspect.Parameter.POSITIONAL_OR_KEYWORD))
+Tracker.__init__.__annotations__ = {name: p.annotation for name, p in Tracker.__init__.__signature__.parameters.items()
+                                    if p.annotation is not inspect.Parameter.empty}
 
 
 def _check_contrast(patch, contour: ContourTemplate, noise: NoiseModel, roi) -> None:
