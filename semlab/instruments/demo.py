@@ -82,6 +82,8 @@ class SimulatedNeedle:
                         ("jitter_fraction", jitter_fraction)):
             if not 0 <= v < 1:
                 raise ValueError(f"{name} must lie in [0, 1), got {v!r}")
+        if isinstance(getattr(demo.acquire_image, "__self__", None), SimulatedNeedle):
+            raise ValueError("this Demo microscope already has a SimulatedNeedle: remove() it first")
         self.demo = demo
         self.tip0 = np.asarray(tip_xy, float)
         self.view = {"rotation_deg": rotation_deg, "skew_deg": skew_deg, "scale": tuple(scale), "flip_y": flip_y}
@@ -111,6 +113,11 @@ class SimulatedNeedle:
         """The true image Jacobian (px per nm of RAW x, y) at ``pixel_size_nm``."""
         return view_jacobian(pixel_size_nm, **self.view)
 
+    def effective_jacobian(self, pixel_size_nm: float) -> np.ndarray:
+        """What one commanded nm does in the image on average: the view times the move error (what
+        :func:`semlab.calibrate_positioner` should measure)."""
+        return self.jacobian(pixel_size_nm) @ self.move_error
+
     def tip_px(self, pixel_size_nm: float) -> np.ndarray:
         """Where the tip is (px, before image drift) for the Demo's current manipulator position."""
         d = self._position_nm() - self.origin_nm
@@ -133,8 +140,8 @@ class SimulatedNeedle:
 
     def remove(self) -> None:
         """Restore the Demo's own acquisition and moves."""
-        self.demo.acquire_image = self._acquire
-        self.demo.move_manipulator_relative = self._move
+        for name in ("acquire_image", "move_manipulator_relative"):
+            self.demo.__dict__.pop(name, None)  # the class's methods show through again
 
     # ------------------------------------------------------------------ the hooks
     def _sem(self, width: int, height: int, pixel_size_nm: float) -> SimulatedSEM:
