@@ -40,16 +40,16 @@ except ImportError as err:
     pytest.skip(f'fibsem is not installed ({err}): pip install "semlab[fibsem]" (make setup does)',
                 allow_module_level=True)
 
-from fibsem.structures import FibsemManipulatorPosition, ImageSettings  # noqa: E402
+from fibsem.structures import FibsemManipulatorPosition, ImageSettings
 
-from semlab.instruments.demo import SimulatedNeedle  # noqa: E402
-from semlab.instruments.fibsem import FibsemManipulator, FibsemMicroscope, connect  # noqa: E402
-from semlab.positioning import calibrate_positioner, move_positioner_to  # noqa: E402
-from semlab.roi import roi_from_click  # noqa: E402
+from semlab.instruments.demo import SimulatedNeedle
+from semlab.instruments.fibsem import FibsemManipulator, FibsemMicroscope, connect
+from semlab.positioning import calibrate_positioner, move_positioner_to
+from semlab.roi import roi_from_click
 
 WIDTH, HEIGHT, PIXEL_NM = 640, 480, 50.0
 #: 640x480 at 0.1 us dwell: a 31-ms scan (the Demo sleeps for it).
-SETTINGS = dict(resolution=(WIDTH, HEIGHT), dwell_time=1e-7, hfw=WIDTH * PIXEL_NM * 1e-9)
+SETTINGS = {"resolution": (WIDTH, HEIGHT), "dwell_time": 1e-7, "hfw": WIDTH * PIXEL_NM * 1e-9}
 
 
 @pytest.fixture(scope="module")

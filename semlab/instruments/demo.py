@@ -83,7 +83,7 @@ class SimulatedNeedle:
             if not 0 <= v < 1:
                 raise ValueError(f"{name} must lie in [0, 1), got {v!r}")
         if isinstance(getattr(demo.acquire_image, "__self__", None), SimulatedNeedle):
-            raise ValueError("this Demo microscope already has a SimulatedNeedle: remove() it first")
+            raise ValueError("this Demo microscope already has a SimulatedNeedle: remove() it first")  # noqa: TRY004
         self.demo = demo
         self.tip0 = np.asarray(tip_xy, float)
         self.view = {"rotation_deg": rotation_deg, "skew_deg": skew_deg, "scale": tuple(scale), "flip_y": flip_y}
