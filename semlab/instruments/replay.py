@@ -119,7 +119,7 @@ def _load(source):
     """(frames, meta, pixel_size_nm) from a FrameSequence, an array or read_frames' inputs."""
     from semlab.io import FrameSequence, read_frames
 
-    if isinstance(source, np.ndarray) and source.ndim in (2, 3):
+    if isinstance(source, np.ndarray):  # one frame or a stack; other shapes are refused by the caller
         arr = source[None] if source.ndim == 2 else source
         return arr, {}, None
     if not isinstance(source, FrameSequence):
