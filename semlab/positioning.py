@@ -38,11 +38,11 @@ __all__ = [
 ]
 
 SERVO_COLUMNS = ("frame", "t", "x", "y", "target_x", "target_y", "error_px", "ok", "dx_nm", "dy_nm")
-#: Image length (px) of a calibration test move when ``step_nm`` is not given: large against the
-#: tracker's noise (~0.05 px, so the Jacobian's relative error is ~0.3 %), small enough to stay
-#: well inside the tracker's search window (+-50 px by default) and near the start point, where the
-#: mapping is linear.
-TEST_MOVE_PX = 12.0
+#: Image length (px) of a calibration test move when ``step_nm`` is not given: long against the
+#: tracker's noise and its position-dependent bias (each ~0.1 px: ~0.5 % of the move), short enough to
+#: stay well inside the tracker's search window (+-50 px by default) and near the start point, where
+#: the mapping is linear.
+TEST_MOVE_PX = 20.0
 #: Frames grabbed after each test move before measuring: one for a move still settling.
 SETTLE_FRAMES = 1
 #: Frames averaged per measured position (the tracker's noise falls as 1/sqrt of it).
@@ -66,6 +66,16 @@ MAX_CONDITION = 20.0
 #: g = 0.7 keeps them within 0.46 of the origin from l = 0 to 0.3 (0.8 reaches 0.49 at l = 0.3 and rings
 #: past a 0.5 px band on 60-px moves), and tolerates a calibration off by up to 2/g - 1 = 185 %.
 DEFAULT_GAIN = 0.7
+#: Frames the servo tracks the still tip before its first move. The tracker's template is the ROI of
+#: one frame until it has averaged more (Tracker's template_frames), and along a needle's shaft a
+#: one-frame template leaves registration errors of 0.3-0.9 px on the first frames after a 40-px move
+#: (the Demo bridge, seed 1); four still frames average the template before anything moves.
+WARMUP_FRAMES = 4
+#: Inside this distance (px) of the target a correction waits for FINE_AVERAGE frames of the still tip:
+#: the tracker's single-frame error along a needle's shaft (~0.15 px RMS on the Demo bridge) would
+#: otherwise send noise as moves.
+FINE_ZONE_PX = 1.0
+FINE_AVERAGE = 2
 #: Dead band in multiples of the tracker's 2-D RMS noise: the error of a still tip is Rayleigh
 #: distributed, so noise alone leaves a band of 2 RMS on exp(-4) = 1.8 % of frames. Kept inside
 #: [MIN_DEADBAND_PX, MAX_DEADBAND_PX]: the upper end keeps it well inside a 0.5 px tolerance.
@@ -87,7 +97,9 @@ class PositionerCalibration:
     jacobian : (2, 2) ndarray
         ``J`` in px per nm: column ``j`` is the image shift per nm of axis ``j`` (x, y).
     jacobian_std : (2, 2) ndarray
-        Standard error of each entry, from the residuals of the least-squares fit.
+        Standard error of each entry, from the residuals of the least-squares fit (moves taken as
+        independent; a tracker bias that repeats at the same position does not show in the residuals,
+        so the true error can reach a few of these).
     residual_px : float
         RMS residual (px) of the linear fit over all test moves.
     noise_px : float
@@ -431,13 +443,53 @@ def _servo_command(positioner, calibration, error, gain, max_step_px):
     return du, clipped, note
 
 
+class _ServoLoop:
+    """One frame's decision: estimate, dead band, command, safety (see :func:`move_positioner_to`)."""
+
+    def __init__(self, positioner, calibration, target, gain, band, max_step_px):
+        self.positioner, self.calibration, self.target = positioner, calibration, target
+        self.gain, self.band, self.max_step_px = gain, band, max_step_px
+        self.still = []  # positions seen since the last move was sent: the tip has not been moved
+
+    def observe(self, x, y, ok) -> None:
+        if ok:
+            self.still.append((x, y))
+
+    def step(self, x, y, ok, reason, *, last: bool) -> dict:
+        self.observe(x, y, ok)
+        err = self.target - (x, y)
+        est = self.target - np.mean(self.still, axis=0) if self.still else np.full(2, np.nan)
+        du, clipped, held = np.zeros(2), False, False
+        distance = float(np.hypot(*est))
+        fine_wait = distance < FINE_ZONE_PX and len(self.still) < FINE_AVERAGE
+        if not ok:
+            held = True
+        elif distance > self.band and not last and not fine_wait:  # a move after the last frame is never seen
+            du, clipped, reason = _servo_command(self.positioner, self.calibration, est, self.gain,
+                                                 self.max_step_px)
+            if np.any(du):
+                try:
+                    self.positioner.move_by(float(du[0]), float(du[1]))
+                    self.still = []
+                except (ValueError, RuntimeError) as refusal:
+                    du, held, reason = np.zeros(2), True, f"move refused: {refusal}"
+        return {"error_px": float(np.hypot(*err)), "ok": ok, "dx_nm": float(du[0]), "dy_nm": float(du[1]),
+                "error_x": float(err[0]), "error_y": float(err[1]), "estimate_error_px": distance,
+                "averaged": len(self.still) if ok else 0, "held": held, "clipped": bool(clipped),
+                "reason": reason}
+
+
 def move_positioner_to(microscope, positioner, roi, target_xy, *, calibration, n_frames: int = 60,
                        gain: float = DEFAULT_GAIN, deadband_px: float | None = None, max_step_px: float = 40.0,
-                       tracker=None, progress: bool = False) -> pd.DataFrame:
+                       warmup_frames: int = WARMUP_FRAMES, tracker=None, progress: bool = False) -> pd.DataFrame:
     """Drive a positioner until the ROI's centre point sits at ``target_xy`` in the image.
 
     Image-based visual servo (paper, Fig. 8a) with the calibrated Jacobian: after frame ``k`` the move
-    ``du = gain J^-1 (target - p_k)`` is sent (it shows from frame ``k + 1``). Safety: a frame the
+    ``du = gain J^-1 (target - p_k)`` is sent (it shows from frame ``k + 1``), where ``p_k`` is the mean
+    of the positions tracked since the last move (the tip has not been moved since, so averaging them
+    beats the tracker's single-frame noise; within ``FINE_ZONE_PX`` of the target a correction waits
+    for ``FINE_AVERAGE`` of them). Before the first move the tracker follows the still tip for
+    ``warmup_frames`` frames (not rows of the result). Safety: a frame the
     tracker flags (``ok=False``: lost, blanked, unusable or no frame at all) sends nothing; inside the
     dead band nothing is sent; no axis command below ``positioner.resolution_nm``; moves are clipped
     into ``positioner.limits`` when the positioner reads its position, and a move the positioner
@@ -462,6 +514,8 @@ def move_positioner_to(microscope, positioner, roi, target_xy, *, calibration, n
         [``MIN_DEADBAND_PX``, ``MAX_DEADBAND_PX``].
     max_step_px : float
         Largest image shift asked for in one frame (stays inside the tracker's search window).
+    warmup_frames : int
+        Still frames tracked before the first move (:data:`WARMUP_FRAMES`).
     tracker : optional
         ``init(frame, roi)``/``update(frame)``; default ``Tracker()``.
     progress : bool
@@ -470,10 +524,13 @@ def move_positioner_to(microscope, positioner, roi, target_xy, *, calibration, n
     -------
     DataFrame
         One row per frame: ``frame, t, x, y, target_x, target_y, error_px, ok, dx_nm, dy_nm`` and
-        ``error_x, error_y, score, held, clipped, reason``. ``x, y`` are the tracked position (NaN
-        when ``ok`` is False), ``error_px`` the distance to the target, ``dx_nm, dy_nm`` the move sent
-        after this frame (0 when none), ``held`` marks frames where a move was due but withheld
-        (tracker flag, refused move), ``clipped`` a move shortened by ``max_step_px`` or the limits.
+        ``score, error_x, error_y, estimate_error_px, averaged, held, clipped, reason``. Frame 0 is the
+        last frame before the first move. ``x, y`` are the tracked position (NaN when ``ok`` is False),
+        ``error_px`` its distance to the target, ``estimate_error_px`` the distance of the mean of the
+        ``averaged`` positions seen since the last move (what the command is computed from),
+        ``dx_nm, dy_nm`` the move sent after this frame (0 when none), ``held`` marks frames where the
+        tracker's flag or a refused move withheld it, ``clipped`` a move shortened by ``max_step_px``
+        or the limits. ``attrs`` holds the dead band, gain, step limit and warm-up.
 
     Raises
     ------
@@ -487,9 +544,16 @@ def move_positioner_to(microscope, positioner, roi, target_xy, *, calibration, n
     if not np.all(np.isfinite(np.asarray(target_xy, float))):
         raise ValueError(f"target {target_xy!r} is not finite: refusing to drive blind")
     _roi_centre(roi)
+    if isinstance(warmup_frames, bool) or not isinstance(warmup_frames, (int, np.integer)) or warmup_frames < 0:
+        raise ValueError(f"warmup_frames must be a non-negative integer, got {warmup_frames!r}")
     eye = _Eye(microscope, tracker, roi)
     target = _check_target(target_xy, eye.shape)
     first = eye.first
+    loop = _ServoLoop(positioner, calibration, target, gain, band, max_step_px)
+    seen = (float(first.x), float(first.y), float(first.score), True, "")
+    for _ in range(int(warmup_frames)):  # the still tip: the tracker's template averages these
+        loop.observe(*seen[:2], seen[3])
+        seen = eye.look()
     rows = []
     it = range(int(n_frames))
     if progress:
@@ -497,27 +561,13 @@ def move_positioner_to(microscope, positioner, roi, target_xy, *, calibration, n
 
         it = tqdm(it, desc="moving", leave=False)
     for k in it:
-        if k == 0:
-            x, y, score, ok, reason = float(first.x), float(first.y), float(first.score), True, ""
-        else:
-            x, y, score, ok, reason = eye.look()
-        err = target - (x, y)
-        du, clipped, held = np.zeros(2), False, False
-        if not ok:
-            held = True
-        elif np.hypot(*err) > band and k < n_frames - 1:  # a move after the last frame is never seen
-            du, clipped, reason = _servo_command(positioner, calibration, err, gain, max_step_px)
-            if np.any(du):
-                try:
-                    positioner.move_by(float(du[0]), float(du[1]))
-                except (ValueError, RuntimeError) as refusal:
-                    du, held, reason = np.zeros(2), True, f"move refused: {refusal}"
+        x, y, score, ok, reason = seen if k == 0 else eye.look()
+        row = loop.step(x, y, ok, reason, last=k == n_frames - 1)
         rows.append({"frame": k, "t": eye.time() if k else 0.0, "x": x, "y": y,
-                     "target_x": target[0], "target_y": target[1], "error_px": float(np.hypot(*err)),
-                     "ok": ok, "dx_nm": float(du[0]), "dy_nm": float(du[1]), "error_x": float(err[0]),
-                     "error_y": float(err[1]), "score": score, "held": held, "clipped": bool(clipped),
-                     "reason": reason})
+                     "target_x": target[0], "target_y": target[1], "score": score, **row})
     df = pd.DataFrame(rows)
+    df = df[list(SERVO_COLUMNS) + [c for c in df.columns if c not in SERVO_COLUMNS]]
     df.attrs.update(deadband_px=band, gain=float(gain), max_step_px=float(max_step_px),
+                    warmup_frames=int(warmup_frames),
                     frame_period=float(microscope.frame_period))
     return df

@@ -44,7 +44,7 @@ from fibsem.structures import FibsemManipulatorPosition, ImageSettings
 
 from semlab.instruments.demo import SimulatedNeedle
 from semlab.instruments.fibsem import FibsemManipulator, FibsemMicroscope, connect
-from semlab.positioning import calibrate_positioner, move_positioner_to
+from semlab.positioning import WARMUP_FRAMES, calibrate_positioner, move_positioner_to
 from semlab.roi import roi_from_click
 
 WIDTH, HEIGHT, PIXEL_NM = 640, 480, 50.0
@@ -138,7 +138,7 @@ def test_calibration_on_the_demo_recovers_the_hidden_mapping(demo):
     roi = roi_from_click(first, bridge.tip0, size=200)
     cal = calibrate_positioner(scope, arm, roi)
     true = bridge.effective_jacobian(scope.pixel_size_nm)
-    # 600-nm test moves with 8 nm jitter per axis and ~0.05 px tracker noise: sigma_J ~ 1.4e-4 px/nm
+    # 1000-nm test moves with 12 nm jitter per axis and ~0.1 px tracker noise: sigma_J ~ 1.3e-4 px/nm
     # per entry (test_positioning.py); 4 sigma
     assert np.abs(cal.jacobian - true).max() < 5.6e-4
     (ax, ay), (tx, ty) = cal.axis_angles_deg, [math.degrees(math.atan2(true[1, i], true[0, i])) for i in (0, 1)]
@@ -201,7 +201,8 @@ def test_a_blanked_or_lost_frame_holds_the_manipulator_still(demo):
     roi = roi_from_click(first, bridge.tip0, size=200)
     cal = calibrate_positioner(scope, arm, roi)
     centre = np.array([roi[0] + 99.5, roi[1] + 99.5])
-    faulty = Faults(scope, bridge, blank=[2], hide=[3])  # servo frames 2 (beam blanked) and 3 (no needle)
+    # servo frames 2 (beam blanked) and 3 (no needle); the servo's warm-up frames come first
+    faulty = Faults(scope, bridge, blank=[WARMUP_FRAMES + 2], hide=[WARMUP_FRAMES + 3])
     df = move_positioner_to(faulty, arm, roi, centre + (45.0, 10.0), calibration=cal, n_frames=12)
     flagged = df[~df["ok"]]
     assert list(flagged["frame"]) == [2, 3]
