@@ -44,22 +44,6 @@ TOLERANCE_PX = 0.5
 TARGET_FRAMES = 10
 
 
-class Faults:
-    """The microscope with the needle's faults at given grab counts (blank beam, needle out of view)."""
-
-    def __init__(self, scope, needle, blank=(), hide=()):
-        self.scope, self.needle, self.n, self.blank, self.hide = scope, needle, 0, set(blank), set(hide)
-        self.frame_period = scope.frame_period
-
-    def grab(self):
-        if self.n in self.blank:
-            self.needle.blank_frames(1)
-        if self.n in self.hide:
-            self.needle.hide_needle(1)
-        self.n += 1
-        return self.scope.grab()
-
-
 def frames_to_tolerance(err):
     inside = err <= TOLERANCE_PX
     if not inside.any():
@@ -74,8 +58,8 @@ def true_errors(needle, df, roi, target):
     return np.hypot(*(np.asarray(target) - (centre0 + truth - truth[0])).T)
 
 
-def serve(scope, arm, needle, roi, target, cal, microscope=None):
-    df = move_positioner_to(microscope or scope, arm, roi, target, calibration=cal, n_frames=N_FRAMES)
+def serve(scope, arm, needle, roi, target, cal):
+    df = move_positioner_to(scope, arm, roi, target, calibration=cal, n_frames=N_FRAMES)
     err = true_errors(needle, df, roi, target)
     x, y = df[["x", "y"]].iloc[-1]
     new_roi = (round(x - 99.5), round(y - 99.5), 200, 200) if df["ok"].iloc[-1] else roi
@@ -122,8 +106,8 @@ def one_seed(seed: int, fib) -> tuple[dict, list[dict]]:
             if label == "calibrated":  # the faulty move, calibrated only
                 centre = np.array([roi[0] + 99.5, roi[1] + 99.5])
                 target = centre + 45.0 * np.array([np.cos(targets[0][1] + 2.0), np.sin(targets[0][1] + 2.0)])
-                faulty = Faults(scope, needle, blank=[WARMUP_FRAMES + 2], hide=[WARMUP_FRAMES + 3])
-                df, err, roi = serve(scope, arm, needle, roi, target, cal, microscope=faulty)
+                needle.schedule(blank=[WARMUP_FRAMES + 2], hide=[WARMUP_FRAMES + 3])
+                df, err, roi = serve(scope, arm, needle, roi, target, cal)
                 t = needle.truth.iloc[-len(df):].reset_index(drop=True)
                 # frame 3 shows the last move's late part (the stepper's lag); nothing was sent after
                 # frames 2 and 3, so frame 4 must show the manipulator where frame 3 did

@@ -373,8 +373,10 @@ def _fit_jacobian(moves: pd.DataFrame, step: float, noise: float, meta: dict) ->
             f"px, fit {fit[worst].round(2).tolist()} px). An axis slipping or sticking, a tip that does "
             "not come back, or the tracker jumping to another feature")
     cov = np.linalg.inv(u.T @ u)
-    sig2 = np.sum(res ** 2, axis=0) / dof
-    jac_std = np.sqrt(np.outer(sig2, np.diag(cov)))
+    # one residual variance pooled over both image coordinates (2 x dof degrees of freedom): with 8
+    # moves, a per-coordinate estimate (6 dof) is itself uncertain by +-30 % and often far too small
+    sig2 = np.sum(res ** 2) / (2 * dof)
+    jac_std = np.sqrt(sig2 * np.tile(np.diag(cov), (2, 1)))
     moves = moves.assign(fit_dpx=fit[:, 0], fit_dpy=fit[:, 1])
     cal = PositionerCalibration(jac, jac_std, rms, noise, float(step), moves, meta)
     if not np.isfinite(cal.condition) or cal.condition > MAX_CONDITION:

@@ -178,23 +178,6 @@ def test_demo_servo_lands_within_half_a_pixel_in_ten_frames(demo, seed):
         centre = np.array([roi[0] + 99.5, roi[1] + 99.5])
 
 
-class Faults:
-    """The microscope, with the needle's faults scheduled at given grab counts."""
-
-    def __init__(self, scope, bridge, blank=(), hide=()):
-        self.scope, self.bridge, self.n = scope, bridge, 0
-        self.blank, self.hide = set(blank), set(hide)
-        self.frame_period = scope.frame_period
-
-    def grab(self):
-        if self.n in self.blank:
-            self.bridge.blank_frames(1)
-        if self.n in self.hide:
-            self.bridge.hide_needle(1)
-        self.n += 1
-        return self.scope.grab()
-
-
 def test_a_blanked_or_lost_frame_holds_the_manipulator_still(demo):
     bridge, scope, arm = rig(demo, seed=4)
     first = scope.grab()
@@ -202,8 +185,8 @@ def test_a_blanked_or_lost_frame_holds_the_manipulator_still(demo):
     cal = calibrate_positioner(scope, arm, roi)
     centre = np.array([roi[0] + 99.5, roi[1] + 99.5])
     # servo frames 2 (beam blanked) and 3 (no needle); the servo's warm-up frames come first
-    faulty = Faults(scope, bridge, blank=[WARMUP_FRAMES + 2], hide=[WARMUP_FRAMES + 3])
-    df = move_positioner_to(faulty, arm, roi, centre + (45.0, 10.0), calibration=cal, n_frames=12)
+    bridge.schedule(blank=[WARMUP_FRAMES + 2], hide=[WARMUP_FRAMES + 3])
+    df = move_positioner_to(scope, arm, roi, centre + (45.0, 10.0), calibration=cal, n_frames=12)
     flagged = df[~df["ok"]]
     assert list(flagged["frame"]) == [2, 3]
     assert (flagged[["dx_nm", "dy_nm"]] == 0).all().all() and flagged["held"].all()

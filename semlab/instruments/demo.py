@@ -97,6 +97,7 @@ class SimulatedNeedle:
         self._sems = {}
         self._pending = np.zeros(3)
         self._blank = self._hidden = 0
+        self._blank_at, self._hide_at = set(), set()
         self._log = []
         self._acquire = demo.acquire_image
         self._move = demo.move_manipulator_relative
@@ -138,6 +139,13 @@ class SimulatedNeedle:
         """The next ``n`` frames show the substrate without the needle (it left the view)."""
         self._hidden += int(n)
 
+    def schedule(self, *, blank=(), hide=()) -> None:
+        """Fault the acquisitions ``k`` from now (0 = the next one): beam blanked in ``blank``, needle
+        out of view in ``hide``."""
+        now = len(self._log)
+        self._blank_at.update(now + int(k) for k in blank)
+        self._hide_at.update(now + int(k) for k in hide)
+
     def remove(self) -> None:
         """Restore the Demo's own acquisition and moves."""
         for name in ("acquire_image", "move_manipulator_relative"):
@@ -157,7 +165,9 @@ class SimulatedNeedle:
         ps = float(image.metadata.pixel_size.x) * _NM_PER_M
         sem = self._sem(cols, rows, ps)
         tip = self.tip_px(ps)
-        blank, hidden = self._blank > 0, self._hidden > 0
+        index = len(self._log)
+        blank = self._blank > 0 or index in self._blank_at
+        hidden = self._hidden > 0 or index in self._hide_at
         self._blank, self._hidden = max(0, self._blank - 1), max(0, self._hidden - 1)
         far = np.array([-10.0 * cols, -10.0 * rows])  # the needle well outside the frame
         frame = sem.acquire(far if hidden else tip)

@@ -10,7 +10,6 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import platform
 import sys
 from datetime import UTC, datetime
 from pathlib import Path
@@ -29,8 +28,11 @@ def _describe(obj) -> dict:
 
 
 def _versions() -> dict:
-    env = {"python": platform.python_version(), "platform": platform.platform()}
-    for name in ("semlab", "fibsem", "numpy", "pandas", "cv2", "skimage"):
+    """``semlab track``'s environment record, plus semlab's and fibsem's versions."""
+    from semlab.cli import _environment
+
+    env = _environment()
+    for name in ("semlab", "fibsem"):
         mod = sys.modules.get(name)
         if mod is not None:
             env[name] = getattr(mod, "__version__", "?")
