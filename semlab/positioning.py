@@ -562,10 +562,11 @@ def move_positioner_to(microscope, positioner, roi, target_xy, *, calibration, n
         from tqdm.auto import tqdm
 
         it = tqdm(it, desc="moving", leave=False)
+    t0 = eye.time()  # of frame 0, the last frame before the first move
     for k in it:
         x, y, score, ok, reason = seen if k == 0 else eye.look()
         row = loop.step(x, y, ok, reason, last=k == n_frames - 1)
-        rows.append({"frame": k, "t": eye.time() if k else 0.0, "x": x, "y": y,
+        rows.append({"frame": k, "t": eye.time() - t0, "x": x, "y": y,
                      "target_x": target[0], "target_y": target[1], "score": score, **row})
     df = pd.DataFrame(rows)
     df = df[list(SERVO_COLUMNS) + [c for c in df.columns if c not in SERVO_COLUMNS]]

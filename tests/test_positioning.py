@@ -174,6 +174,8 @@ def test_servo_lands_within_half_a_pixel_in_ten_frames(calibrated, offset, lag):
     first = int(np.argmax(within))
     assert within.any() and within[first:].all(), err.round(2)
     assert first <= 10
+    # the clock: frame k at k frame periods after frame 0 (the rig has no time stamps)
+    assert df["t"].to_numpy() == pytest.approx(np.arange(len(df)) / 13)
     assert df["ok"].all() and set(df.columns) >= {"frame", "t", "x", "y", "target_x", "target_y",
                                                   "error_px", "ok", "dx_nm", "dy_nm"}
 
