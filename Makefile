@@ -1,5 +1,5 @@
 # semlab: one entry point for setting up, running the workbench and testing.
-#   make lab    - create .venv, install semlab with its extras (dev, fibsem), register the kernel, start JupyterLab
+#   make lab    - create .venv, install semlab with its extras, register the kernel, start JupyterLab
 #   make test   - same set-up, then the whole test suite (notebooks and the browser test included)
 # Second runs reinstall nothing unless pyproject.toml changed.
 

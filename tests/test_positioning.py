@@ -260,3 +260,20 @@ def test_calibration_maps_both_ways(calibrated):
     d = np.array([123.0, -45.0])
     assert calibrated.to_positioner(calibrated.to_image(d)) == pytest.approx(d)
     assert isinstance(calibrated, PositionerCalibration) and calibrated.condition < 2
+
+
+def test_a_frame_that_cannot_be_grabbed_holds(calibrated):
+    rig = StepperRig(seed=3)
+    original, calls = rig.grab, {"n": 0}
+
+    def grab():  # servo frame 2: the instrument times out
+        calls["n"] += 1
+        if calls["n"] - WARMUP_FRAMES == 3:
+            raise TimeoutError("acquisition timed out")
+        return original()
+
+    rig.grab = grab
+    df = move_positioner_to(rig, rig, roi_at(TIP0), TIP0 + (20.0, 5.0), calibration=calibrated, n_frames=6)
+    row = df.iloc[2]
+    assert not row["ok"] and row["held"] and "timed out" in row["reason"]
+    assert row["dx_nm"] == 0 and row["dy_nm"] == 0
