@@ -18,7 +18,7 @@ setup: $(STAMP)
 
 $(STAMP): pyproject.toml
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --disable-pip-version-check -e '.[dev]'
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check -e '.[dev,fibsem]'
 	$(BIN)/python -m ipykernel install --sys-prefix --name python3 --display-name "Python 3 (semlab)" >/dev/null
 	@touch $(STAMP)
 

@@ -67,6 +67,9 @@ _EXPORTS = {
     # protocols
     "Microscope": "semlab.protocols",
     "Axis": "semlab.protocols",
+    # closed-loop positioners (FIB/SEM manipulators, semlab.instruments)
+    "Positioner": "semlab.protocols",
+    "calibrate_positioner": "semlab.positioning",
 }
 
 __all__ = sorted(_EXPORTS) + ["__version__"]  # noqa: PLE0605 (built from the lazy export table)
