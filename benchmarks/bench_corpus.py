@@ -21,6 +21,7 @@ everyone else): compare within one run only.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 
@@ -77,8 +78,11 @@ def main(argv=None) -> int:
     print("\n".join(_semlab_vs_best_peer(summary)))
     budget = BUDGET_SMALL_S if n_seeds <= 2 else BUDGET_STANDARD_S
     verdict = "within" if wall <= budget else "OVER"
+    cpu = sum(m.get("task_cpu_s", 0.0) for m in df.attrs["sequences"].values())
     print(f"\n# wall time {wall:.0f} s ({verdict} the {budget / 60:.0f}-min budget for {n_seeds} seeds; "
-          "measured on a machine shared with other jobs)")
+          f"load average at the end {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores)")
+    print(f"# CPU time of the tasks {cpu:.0f} s: {cpu / 2:.0f} s of wall time on 2 otherwise idle cores "
+          "(+ the cluster's start-up)")
     return 0
 
 

@@ -643,9 +643,9 @@ def _cmd_evaluate(args, argv) -> int:
     if args.workers is not None and args.workers < 1:
         raise _CLIError(EXIT_USAGE, f"--workers must be >= 1, got {args.workers}")
     try:
-        df, frames = ev.evaluate(families, seeds, args.trackers, params=params, scheduler=args.scheduler,
-                                 n_workers=args.workers, per_frame=bool(args.per_frame),
-                                 progress=not args.no_progress)
+        result = ev.evaluate(families, seeds, args.trackers, params=params, scheduler=args.scheduler,
+                             n_workers=args.workers, per_frame=bool(args.per_frame), progress=not args.no_progress)
+        df, frames = result if args.per_frame else (result, None)
     except ev.SchedulerUnreachable as e:
         raise _CLIError(EXIT_SCHEDULER, str(e)) from None
     summary = ev.summarise(df)

@@ -280,3 +280,14 @@ def test_figure_draws_every_tracker():
     out = plot_corpus(df, ax)
     assert set(out["markers"]) == {"semlab", "ncc"} and ax.get_yscale() == "log"
     plt.close(fig)
+
+
+def test_family_frames_figure(sequences):
+    import matplotlib.pyplot as plt
+
+    from semlab.evaluation.figures import plot_family_frames
+
+    axes = plot_family_frames({k: sequences[k] for k in ("still", "semi_real")})
+    assert [a.get_title() for a in axes] == ["still (seed 0)", "semi_real (seed 0)"]
+    assert len(axes[0].patches) == 1  # the ROI
+    plt.close("all")

@@ -42,6 +42,16 @@ def test_writes_the_csv_sidecar_summary_and_figure(tmp_path, capsys):
     assert not list(tmp_path.glob(".*partial*"))
 
 
+def test_default_cluster_run_without_extras(tmp_path, capsys):
+    # the LocalCluster (two worker processes) and only the CSV and its sidecar
+    out = tmp_path / "r.csv"
+    code, stdout, _ = _run(["--families", "shapes", "--seeds", "1", "--trackers", "sqdiff", "--workers", "1",
+                            "--out", str(out), "--no-progress"], capsys)
+    assert code == 0 and sorted(p.name for p in tmp_path.iterdir()) == ["r.csv", "r.csv.json"]
+    assert "LocalCluster(1 workers" in json.loads((tmp_path / "r.csv.json").read_text())["scheduler"]
+    assert "| shapes | sqdiff |" in stdout
+
+
 @pytest.mark.parametrize("args, valid", [(["--families", "still,marsh"], "still, moves_200px"),
                                          (["--trackers", "semlab,kcf"], "semlab, paper, ncc")])
 def test_unknown_names_are_one_line_listing_the_valid_ones(args, valid, tmp_path, capsys):

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import logging
 import os
+import time
 from collections.abc import Mapping
 
 import pandas as pd
@@ -102,6 +103,7 @@ def evaluate_sequence(family: str, seed: int, factories: Mapping, per_frame: boo
     This is the unit of work of :func:`evaluate` (one dask task).
     """
     _single_threaded_in_worker()
+    cpu0, wall0 = time.process_time(), time.perf_counter()
     seq = make_family_sequence(family, seed)
     rows, frames = [], []
     for name, factory in factories.items():
@@ -117,6 +119,9 @@ def evaluate_sequence(family: str, seed: int, factories: Mapping, per_frame: boo
             errors.insert(0, "family", family)
             frames.append(errors[PER_FRAME_COLUMNS])
     meta = {k: v for k, v in seq.meta.items() if k not in ("family", "seed")}
+    # the task's own CPU time: on a shared machine, its wall time says more about the others
+    meta["task_cpu_s"] = round(time.process_time() - cpu0, 3)
+    meta["task_wall_s"] = round(time.perf_counter() - wall0, 3)
     return rows, (pd.concat(frames, ignore_index=True) if per_frame else None), meta
 
 
@@ -139,7 +144,8 @@ def _connect(scheduler, n_workers):
 
     if scheduler in (None, "local"):
         n = n_workers or min(os.cpu_count() or 1, MAX_LOCAL_WORKERS)
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+        # dashboard on a free port: the default 8787 may be taken by another cluster on the machine
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
                                silence_logs=logging.ERROR)
         return Client(cluster), cluster, f"LocalCluster({n} workers x 1 thread)"
     try:
