@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -99,19 +100,30 @@ def test_an_interrupted_run_leaves_no_complete_looking_output(tmp_path, capsys, 
 
 
 def test_sigint_to_a_running_evaluate_leaves_nothing(tmp_path):
-    out = tmp_path / "r.csv"
-    proc = subprocess.Popen([str(BIN / "semlab"), "evaluate", "--families", "moves_200px", "--seeds", "0-5",
-                             "--scheduler", "inline", "--out", str(out), "--no-progress"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    out_dir = tmp_path / "out"
+    out_dir.mkdir()
+    log = tmp_path / "stderr.txt"
+    with open(log, "w") as err:
+        # the semlab command, with Python's Ctrl-C handler installed even when started as a background
+        # job (which inherits SIGINT ignored, and Python then leaves it ignored)
+        launcher = ("import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
+                    "from semlab.cli import main; sys.exit(main(sys.argv[1:]))")
+        proc = subprocess.Popen([sys.executable, "-c", launcher, "evaluate", "--families", "moves_200px", "--seeds",
+                                 "0-9", "--scheduler", "inline", "--out", str(out_dir / "r.csv")],
+                                stdout=subprocess.DEVNULL, stderr=err, text=True)
     try:
-        time.sleep(6)  # inside the first sequences (6 x ~10 s of work)
-        proc.send_signal(2)
-        _, err = proc.communicate(timeout=60)
+        for _ in range(600):  # the progress bar appears once the run has started
+            if "corpus" in log.read_text():
+                break
+            time.sleep(0.1)
+        time.sleep(1.0)
+        proc.send_signal(signal.SIGINT)
+        proc.wait(timeout=60)
     finally:
         if proc.poll() is None:
             proc.kill()
-    assert proc.returncode == cli.EXIT_INTERRUPTED, err
-    assert list(tmp_path.iterdir()) == []
+    assert proc.returncode == cli.EXIT_INTERRUPTED, log.read_text()[-500:]
+    assert list(out_dir.iterdir()) == []
 
 
 @pytest.fixture

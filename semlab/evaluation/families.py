@@ -109,7 +109,8 @@ RIG = {
     "probe_angle_deg": Uniform(0.0, 360.0),
     "n_static": Int(10, 60),
     "texture": Uniform(0.01, 0.05),
-    "start_offset_px": Uniform(-20.0, 20.0),
+    "start_offset_x_px": Uniform(-20.0, 20.0),
+    "start_offset_y_px": Uniform(-20.0, 20.0),
 }
 WANDER = {
     "speed_px_per_frame": Uniform(0.5, 2.5),
@@ -200,7 +201,7 @@ def _simulate(d: Draws, width: int, height: int, path: np.ndarray, *, noise: SEM
     sem = SimulatedSEM(width, height, pixel_size_nm=pixel_size, frame_period=FRAME_PERIOD, noise=noise,
                        clutter=clutter, probe=probe, seed=int(d.rng.integers(2**31 - 1)),
                        probe_angles_deg=(angle,), background=background, beam_sigma_px=beam_sigma)
-    start = np.array([width / 2 + d("start_offset_px"), height / 2 + d("start_offset_px")])
+    start = np.array([width / 2 + d("start_offset_x_px"), height / 2 + d("start_offset_y_px")])
     start -= 0.5 * (path.min(axis=0) + path.max(axis=0))  # the path's mid-range at the centre
     n = len(path)
     frames = np.empty((n, height, width), np.uint8)
