@@ -45,6 +45,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_tracking.py
 	$(BIN)/python benchmarks/bench_tracking_seeds.py
 	$(BIN)/python benchmarks/bench_servo.py
+	nice -n 10 $(BIN)/python benchmarks/bench_corpus.py
 
 strip: $(STAMP)
 	$(BIN)/nbstripout --keep-id notebooks/*.ipynb
