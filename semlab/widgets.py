@@ -282,6 +282,8 @@ class TemplateExplorer:
         motion frame the ROI was found on.
     frame_label : str
         ``"frame"`` or ``"motion frame k"`` (shown in the readout and the figure).
+    motion_index : int or None
+        ``k`` when the ROI came from motion frame ``k``, None while it is on the frame given.
     motion_error : str
         Why the last *ROI from motion* was refused, '' otherwise.
     controls : dict of ipywidgets
@@ -307,6 +309,7 @@ class TemplateExplorer:
 
         self.frame = np.asarray(frame)
         self.frame_label = "frame"
+        self.motion_index = None
         self.motion_error = ""
         image = as_gray_float(self.frame)
         rows, cols = image.shape
@@ -465,6 +468,7 @@ class TemplateExplorer:
         # The probe moved while the frames were taken: the ROI holds the tip in the frame it was found on.
         self.frame = motion_frame
         self.frame_label = f"motion frame {found.frame_index}"
+        self.motion_index = found.frame_index
         self._roi = found.roi
         cx, cy = roi_centre(self._roi)
         with self._sync():

@@ -1,10 +1,19 @@
-"""Every notebook runs top to bottom in fast mode, and is committed without outputs.
+"""Every notebook runs top to bottom in fast mode, ends on what its results show, and says only what they show.
+
+Each notebook's last cell is its conclusion, a markdown cell headed "What we see"; the code cell before it
+stores the numbers that conclusion rests on in a dict ``RESULTS`` and shows them as a table. After the
+notebook has run (with ``SEMLAB_FAST=1``, as in CI), this test reads ``RESULTS`` from the kernel and checks
+each claim of the conclusion against it (the ``CLAIMS`` below quote the sentences they check), so prose and
+numbers cannot drift apart. The claims are chosen to hold on the notebook's default parameters in fast mode
+and in full mode alike; a claim that stops holding is a conclusion to rewrite, not a tolerance to widen.
 
 The executed copies land in ``test-output/notebooks/`` so that a failing run can be inspected.
 """
 
 from __future__ import annotations
 
+import json
+import math
 from pathlib import Path
 
 import nbformat
@@ -14,6 +23,17 @@ from nbclient import NotebookClient
 ROOT = Path(__file__).resolve().parents[1]
 NOTEBOOKS = sorted((ROOT / "notebooks").glob("*.ipynb"))
 OUTPUT = ROOT / "test-output" / "notebooks"
+CONCLUSION = "## What we see"
+RESULTS_MARK = "SEMLAB-RESULTS "
+
+# Reads RESULTS from the kernel after the notebook ran (not saved into the executed copy).
+_READ_RESULTS = f"""
+import json as _json
+def _plain(v):
+    return v.item() if hasattr(v, "item") else str(v)
+if "RESULTS" in globals():
+    print({RESULTS_MARK!r} + _json.dumps(RESULTS, default=_plain))
+"""
 
 
 def test_there_are_notebooks():
@@ -28,18 +48,198 @@ def test_notebook_is_stripped(path):
     assert not dirty, f"{path.name}: cells {dirty} carry outputs; run `make strip`"
 
 
-@pytest.mark.notebooks
-@pytest.mark.timeout(900)
+# Notebooks whose conclusion their owners are still writing (issue 15 asks it of every notebook).
+PENDING_CONCLUSION = {"05_servo_step.ipynb"}
+
+
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.name)
-def test_notebook_executes(path, monkeypatch):
-    # The kernel inherits this environment: fast mode, and Jupyter's inline figures.
-    monkeypatch.setenv("SEMLAB_FAST", "1")
-    monkeypatch.delenv("MPLBACKEND", raising=False)
+def test_notebook_ends_on_what_we_see(path):
+    if path.name in PENDING_CONCLUSION:
+        pytest.xfail(f"{path.name}: its owner adds the 'What we see' conclusion (issue 15)")
     nb = nbformat.read(path, as_version=4)
+    last = nb.cells[-1]
+    assert last.cell_type == "markdown" and last.source.lstrip().startswith(CONCLUSION), (
+        f"{path.name} does not end on a '{CONCLUSION}' markdown cell")
+    assert len(last.source.split()) >= 60, f"{path.name}: the conclusion is a stub"
+    before = nb.cells[-2]
+    assert before.cell_type == "code" and "RESULTS" in before.source, (
+        f"{path.name}: the cell before the conclusion should store its numbers in RESULTS")
+    assert path.name in CLAIMS, f"{path.name}: no claims check in tests/test_notebooks.py"
+
+
+def _execute(path: Path) -> dict | None:
+    """Run ``path`` in fast mode; return its RESULTS (None when it has none)."""
+    nb = nbformat.read(path, as_version=4)
+    nb.cells.append(nbformat.v4.new_code_cell(_READ_RESULTS))
     client = NotebookClient(nb, timeout=600, kernel_name="python3",
                             resources={"metadata": {"path": str(path.parent)}})
     try:
         client.execute()
     finally:
+        reader = nb.cells.pop()
         OUTPUT.mkdir(parents=True, exist_ok=True)
         nbformat.write(nb, OUTPUT / path.name)
+    for out in reader.get("outputs", []):
+        text = out.get("text", "")
+        if out.get("output_type") == "stream" and text.startswith(RESULTS_MARK):
+            return json.loads(text[len(RESULTS_MARK):])
+    return None
+
+
+@pytest.mark.notebooks
+@pytest.mark.timeout(900)
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.name)
+def test_notebook_executes_and_its_conclusion_holds(path, monkeypatch):
+    # The kernel inherits this environment: fast mode, and Jupyter's inline figures.
+    monkeypatch.setenv("SEMLAB_FAST", "1")
+    monkeypatch.delenv("MPLBACKEND", raising=False)
+    results = _execute(path)
+    check = CLAIMS.get(path.name)
+    if check is None:
+        return
+    assert results is not None, f"{path.name} stores no RESULTS"
+    check(results)
+
+
+# --------------------------------------------------------------------------- the claims, per notebook
+# Each function quotes the sentence of the notebook's "What we see" it checks. Tolerances say where they
+# come from; most claims are orderings (A below B), which need none.
+
+
+def _claims_00(r):
+    # "a 640×480 frame every 1/13 s at 66 nm/px"
+    assert (r["width_px"], r["height_px"]) == (640, 480) and math.isclose(r["frame_rate_hz"], 13.0)
+    assert math.isclose(r["pixel_size_nm"], 66.0, rel_tol=0.01)
+    # "the descending branch lies above the ascending one at every inner voltage, by up to about 47 px of the
+    # 280 px the sweep reaches (17 %)": "about" = within 15 % (fast mode samples the loop at 15 voltages, the
+    # full run at 40, so the largest gap seen moves by a few px).
+    assert r["hysteresis_branches_ordered"]
+    assert 40.0 < r["hysteresis_gap_max_px"] < 54.0 and 265.0 < r["sweep_travel_px"] < 295.0
+    # "the axis refuses a NaN command with an error instead of moving"
+    assert r["nan_command_refused"]
+    # "the low-dose sequence has the largest, 0.22 px against 0.10 px for the static one; ... it is 2.19"
+    assert r["crb_largest"] == "low_dose"
+    assert round(r["crb_low_dose_px"], 2) == 0.22 and round(r["crb_static_px"], 2) == 0.10
+    assert round(r["crb_ratio_low_dose"], 2) == 2.19
+
+
+def _claims_01(r):
+    # "The ROI from motion lands on the probe's front in the last motion frame (motion frame 9), the frame it
+    # was found on"
+    assert r["motion_roi_frame"] == 9 and r["motion_roi_holds_tip_of_last_frame"]
+    # "the contour template runs through the true tip": within 2 px, the edge blur of the render
+    assert r["tip_to_contour_px"] < 2.0
+    # "and holds 267 of the ROI's 40,000 pixels (0.7 %)"
+    assert (r["contour_px"], r["roi_px"]) == (267, 40000)
+    # "the fixed low pair 10/30 marks more edge pixels than eq. 10's pair (1.7 times as many in the fast run's
+    # 12 frames, 2.4 over 100)"
+    assert r["edge_px_ratio_low_to_adaptive"] in (1.68, 2.41)
+    # "eq. 10 puts T_h between 23 and 45"
+    assert 23.0 <= r["adaptive_T_h_min"] and r["adaptive_T_h_max"] <= 45.5
+    # "On the gray-level-fluctuation scene the adaptive pair gives exactly the low pair's track"
+    assert r["gray_adaptive_same_track_as_low"] and r["gray_40_80_same_track_as_80_160"]
+    # "With dense clutter and an occluder, or at low dose, eq. 10's pair ... tracks 2 to 13 times worse than a
+    # fixed 40/80 pair" (contradicts the paper)
+    for kind in ("clutter_occluder", "low_dose"):
+        assert 2.0 <= r[f"rmse_ratio_adaptive_to_40_80_{kind}"] <= 13.0, kind
+    # "Only a pair too high for the probe's edges (150/300) loses the probe outright, which eq. 10 never does"
+    assert r["loss_fixed_high_min"] == 1.0 and r["loss_adaptive_max"] < 0.2
+    # "the probe's steps grow from 0 to 17.9 px"
+    assert abs(r["step_min_px"]) < 0.05 and round(r["step_max_px"], 1) == 17.9
+    # "With Canny σ = 1 px the contour tracker puts 4 of those 10 frames 2 to 10 px off, almost all along x, ...
+    # and reports every one of them ok; ... with the tracker's default σ = 2 px no frame is more than 2 px off"
+    assert r["motion_frames_tracked"] == 10
+    assert r["off_frames_canny_sigma_1"] == 4 == r["off_frames_ok_canny_sigma_1"]
+    assert 8.0 < r["max_error_px_canny_sigma_1"] < 10.5 and r["off_error_share_along_x_min"] > 0.9
+    assert r["off_frames_canny_sigma_2"] == 0 and r["max_error_px_canny_sigma_2"] < 2.0
+
+
+def _claims_02(r):
+    # "semlab's default spreads within 1.5 times the Cramér–Rao bound"
+    assert r["ic_std_over_crb"] < 1.5
+    # "the OpenCV correlators spread less than the bound: they are biased towards no motion"
+    assert r["min_peer_std_over_crb"] < 1.0
+    # "the paper's contour tracker spreads more than semlab's default"
+    assert r["contour_std_px"] > r["ic_std_px"]
+    # "the SSD baseline loses every frame at the lowest dose: drawn as missing, not dropped"
+    assert r["ssd_all_lost_lowest_dose"] and r["missing_points_marked"] >= 1
+    # "semlab's default spreads more as the dose falls"
+    assert r["ic_std_lowest_dose"] > r["ic_std_highest_dose"]
+    # "the contour tracker's spread at the highest dose is one frame that jumped more than 10 px, reported ok;
+    # without its frames more than 2 px off it spreads less there than at the lowest dose"
+    assert r["contour_off_frames_highest_dose"] >= 1 and r["contour_max_error_highest_dose"] > 10
+    assert r["contour_off_frames_ok_highest_dose"] == r["contour_off_frames_highest_dose"]
+    assert r["contour_std_highest_dose"] > 2 * r["contour_inlier_std_highest_dose"]
+    assert r["contour_inlier_std_highest_dose"] < r["contour_inlier_std_lowest_dose"]
+
+
+def _claims_03(r):
+    # "semlab's default follows the moves within {ic_max_error_px} px, never more than 1 px off"
+    assert r["ic_max_error_px"] < 1.0
+    # "the paper's contour tracker jumps: {contour_off_frames} frames more than 2 px off, every one reported ok,
+    # its error along the probe's shaft"
+    assert r["contour_off_frames"] >= 1 and r["contour_off_frames_ok"] == r["contour_off_frames"]
+    assert r["contour_max_error_px"] > 10.0
+    # 20 degrees: the shaft's direction is read from the template to a few degrees; an error along it is
+    # within that, one across it near 90.
+    assert r["contour_off_error_to_shaft_deg"] < 20.0
+    # "at B the manipulator itself spreads {true_std_at_b_px} px, and semlab's tracked spread matches it;
+    # semlab's own error there is a small part of it"
+    assert r["true_std_at_b_px"] > 0.4
+    assert abs(r["ic_tracked_std_at_b_px"] - r["true_std_at_b_px"]) < 0.25 * r["true_std_at_b_px"]
+    assert r["ic_error_std_at_b_px"] < 0.3 * r["true_std_at_b_px"]
+    # "the manipulator's spread is creep: the tip drifts on through every dwell at B"
+    assert r["creep_per_dwell_px_min"] > 0.5
+
+
+def _claims_04(r):
+    # "the polynomial branches fit the major loop better than a straight line"
+    assert r["rms_major_polynomial_px"] < 0.5 * r["rms_major_linear_px"]
+    # "on the unseen path every hysteresis model predicts better than the straight line"
+    assert r["open_loop_rms_polynomial_px"] < r["open_loop_rms_linear_px"]
+    assert r["open_loop_rms_pi_px"] < r["open_loop_rms_linear_px"]
+    # "the Newton–Raphson inverse lands on its targets to 1e-6 px"
+    assert r["inverse_round_trip_max_px"] < 1e-6
+    # "the tracker lost no frame of the characterisation"
+    assert r["characterisation_lost_frames"] == 0
+
+
+def _claims_06(r):
+    # "the three mildest levels were one scene (the simulator's default): it is one baseline row now"
+    assert r["baseline_rows"] == 1
+    # "semlab refuses the 3 pA scene at its first frame, with the reason; OpenCV's ECC tracks it"
+    assert r["semlab_refused_lowest_dose"] and "noise" in r["semlab_refusal_reason"]
+    assert r["ecc_rmse_lowest_dose_px"] < 2.0
+    # "on the still probe the OpenCV correlators are more precise than semlab in most rows"
+    assert r["still_rows_best_peer_beats_semlab"] > r["still_rows"] / 2
+    # "the paper's contour tracker loses the probe among clutter and the occluder; semlab does not"
+    assert r["contour_loss_occluder"] > 0.2 and r["semlab_loss_occluder"] == 0
+    # "on a moving probe semlab's default beats every OpenCV peer on every sequence"
+    assert r["moving_semlab_beats_peers"]
+
+
+def _claims_07(r):
+    # "the reference frame is no longer read as a twelfth frame: 11 frames"
+    assert r["n_frames"] == 11
+    # "semlab's default follows the needle in every frame, contact included"
+    assert r["ic_lost_frames"] == 0
+    # "the needle advances {needle_step_min_px}-{needle_step_max_px} px per frame before contact, short of the
+    # commanded 9.6 px in some steps"
+    assert 3.0 < r["needle_step_min_px"] < r["commanded_step_px"] and r["needle_step_max_px"] < 12.0
+    # "the image drifts by at most {drift_max_px} px"
+    assert r["drift_max_px"] < 3.0
+    # "the paper's contour tracker fails through contact: {contour_wild_frames} frames off the axis' range"
+    assert r["contour_wild_frames"] >= 1 and r["outliers_marked"] >= 1
+    # "the FEI image's contour template traces the needle, left of the landing post"
+    assert r["fei_contour_right_edge_px"] < r["fei_post_left_edge_px"]
+
+
+CLAIMS = {
+    "00_simulated_rig.ipynb": _claims_00,
+    "01_contour_template.ipynb": _claims_01,
+    "02_repeatability.ipynb": _claims_02,
+    "03_moves_200px.ipynb": _claims_03,
+    "04_hysteresis.ipynb": _claims_04,
+    "06_robustness.ipynb": _claims_06,
+    "07_real_sem.ipynb": _claims_07,
+}

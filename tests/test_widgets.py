@@ -164,7 +164,7 @@ def test_roi_from_motion_button_puts_the_roi_on_the_frame_it_was_found_on():
     x, y, w, h = ex.roi
     # The ROI is found on the last motion frame, where the disc is at x = 60 + 8 * 7 = 116: the explorer
     # now works on that frame (on frame 0 the disc, at x = 60, would lie half outside the ROI).
-    assert ex.frame_label == "motion frame 7" and np.array_equal(ex.frame, frames[-1])
+    assert ex.frame_label == "motion frame 7" and ex.motion_index == 7 and np.array_equal(ex.frame, frames[-1])
     assert x <= 116 - R and 116 + R <= x + w - 1 and y <= 75 - R and 75 + R <= y + h - 1
     assert ex.controls["click_x"].value == round(x + (w - 1) / 2)
     # The template is the disc's outline in that frame, centred on the disc; its area pi R^2 within one px
