@@ -73,7 +73,8 @@ def _line_data(ax):
             yield line, x, y
 
 
-def robust_ylim(ax=None, *, k: float = OUTLIER_FENCE, pad: float = 0.08, include=(), unit: str = ""):
+def robust_ylim(ax=None, *, k: float = OUTLIER_FENCE, pad: float = 0.08, include=(), unit: str = "",
+                max_labels: int = 6):
     """Y limits from the lines' inliers, with every outlier marked at the edge it lies beyond.
 
     A few wild values (a tracker that jumped 300 px) would otherwise stretch the axis until the others
@@ -92,6 +93,8 @@ def robust_ylim(ax=None, *, k: float = OUTLIER_FENCE, pad: float = 0.08, include
         Values the limits must contain.
     unit : str
         Appended to the outliers' labels.
+    max_labels : int
+        Per line, only the ``max_labels`` values farthest out are labelled (every outlier gets its marker).
 
     Returns
     -------
@@ -118,17 +121,23 @@ def robust_ylim(ax=None, *, k: float = OUTLIER_FENCE, pad: float = 0.08, include
     ax.set_ylim(lo, hi)
     out = {"limits": (lo, hi), "outliers": [], "markers": []}
     for line, x, y in data:
-        for xi, yi in zip(x, y):
-            if not np.isfinite(yi) or lo <= yi <= hi:
-                continue
-            above = yi > hi
-            edge = hi if above else lo
-            (marker,) = ax.plot([xi], [edge], "^" if above else "v", color=line.get_color(), markersize=8,
-                                clip_on=False, gid="semlab-outlier", zorder=5)
-            text = ax.annotate(f"{yi:.3g}{unit}", (xi, edge), textcoords="offset points",
-                               xytext=(4, -10 if above else 4), fontsize="x-small", color=line.get_color())
-            out["outliers"].append((float(xi), float(yi)))
-            out["markers"] += [marker, text]
+        beyond = np.isfinite(y) & ((y < lo) | (y > hi))
+        if not beyond.any():
+            continue
+        xo, yo = x[beyond], y[beyond]
+        above = yo > hi
+        edges = np.where(above, hi, lo)
+        for mark, side in (("^", above), ("v", ~above)):
+            if side.any():
+                (marker,) = ax.plot(xo[side], edges[side], mark, color=line.get_color(), markersize=8,
+                                    linestyle="none", clip_on=False, gid="semlab-outlier", zorder=5)
+                out["markers"].append(marker)
+        distance = np.maximum(yo - hi, lo - yo)
+        for j in np.argsort(-distance)[:max_labels]:
+            out["markers"].append(ax.annotate(
+                f"{yo[j]:.3g}{unit}", (xo[j], edges[j]), textcoords="offset points",
+                xytext=(4, -10 if above[j] else 4), fontsize="x-small", color=line.get_color()))
+        out["outliers"] += [(float(a), float(b)) for a, b in zip(xo, yo)]
     return out
 
 

@@ -110,6 +110,7 @@ def test_robust_ylim_keeps_the_inliers_and_marks_each_outlier_at_its_edge():
     assert sorted(out["outliers"]) == [(8.0, -341.0), (8.0, -339.0)]
     markers = [m for m in ax.get_lines() if m.get_gid() == "semlab-outlier"]
     assert len(markers) == 2 and markers[0].get_color() == line.get_color()
+    assert markers[0].get_marker() == "v"                      # below the axis: a downward triangle
     assert markers[0].get_ydata()[0] == pytest.approx(lo)      # drawn on the bottom edge
     assert any("-341 px" in t.get_text() for t in ax.texts)
 
@@ -140,3 +141,13 @@ def test_mark_missing_draws_nan_points_instead_of_dropping_them():
     assert marker.get_gid() == "semlab-missing"
     # The marker is in axes coordinates vertically: on the bottom edge whatever the limits.
     assert 0 <= marker.get_ydata()[0] <= 0.05
+
+
+def test_robust_ylim_labels_only_the_farthest_outliers():
+    _, ax = plt.subplots()
+    y = np.r_[np.linspace(0, 1, 100), np.arange(1, 11) * 100.0]      # 10 outliers, 100 .. 1000
+    ax.plot(np.arange(110), y)
+    out = plots.robust_ylim(ax, max_labels=3)
+    assert len(out["outliers"]) == 10
+    labels = sorted(float(t.get_text()) for t in ax.texts)
+    assert labels == [800.0, 900.0, 1000.0]                 # the three farthest
