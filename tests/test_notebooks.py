@@ -213,15 +213,19 @@ def _claims_03(r):
 
 
 def _claims_04(r):
-    # "the polynomial branches fit the major loop better than a straight line"
-    assert r["rms_major_polynomial_px"] < 0.5 * r["rms_major_linear_px"]
-    # "on the unseen path every hysteresis model predicts better than the straight line"
-    assert r["open_loop_rms_polynomial_px"] < r["open_loop_rms_linear_px"]
-    assert r["open_loop_rms_pi_px"] < r["open_loop_rms_linear_px"]
-    # "the Newton–Raphson inverse lands on its targets to 1e-6 px"
-    assert r["inverse_round_trip_max_px"] < 1e-6
-    # "the tracker lost no frame of the characterisation"
-    assert r["characterisation_lost_frames"] == 0
+    # "the characterisation ... loses no frame and measures ... with 0.04 px of scatter across it"
+    assert r["characterisation_lost_frames"] == 0 and r["off_axis_rms_px"] < 0.05
+    # "fourth-order branches fit the major loop to 0.4-0.5 px rms, where a straight line is 18 px off"
+    assert 0.35 <= r["rms_major_polynomial_px"] <= 0.55 and round(r["rms_major_linear_px"]) == 18
+    # "on the inner loops the polynomial model is 3.4 px rms off, where the Prandtl-Ishlinskii model ... is
+    # 0.2-0.4 px off"
+    assert round(r["rms_inner_polynomial_px"], 1) in (3.3, 3.4) and 0.2 <= r["rms_inner_pi_px"] <= 0.45
+    # "the open-loop prediction errors are about 2 px rms (120-140 nm) for the paper's model, 0.5-0.6 px (35 nm)
+    # for PI and 16 px for the straight line"
+    assert 1.7 <= r["open_loop_rms_polynomial_px"] <= 2.2 and 110 <= r["open_loop_rms_polynomial_nm"] <= 145
+    assert 0.5 <= r["open_loop_rms_pi_px"] <= 0.6 and round(r["open_loop_rms_linear_px"]) == 16
+    # "The Newton-Raphson inverse returns the voltage for a desired displacement to 1e-12 px"
+    assert r["inverse_round_trip_max_px"] < 1e-11
 
 
 def _claims_06(r):
