@@ -63,12 +63,18 @@ def outlier_fences(values, *, k: float = OUTLIER_FENCE, log: bool = False) -> tu
     return (float(10**lo), float(10**hi)) if log else (float(lo), float(hi))
 
 
+def _xy(line):
+    """A line's x, y as floats (categorical x, e.g. level names, as the positions matplotlib gave them)."""
+    xy = np.asarray(line.get_xydata(), float).reshape(-1, 2)
+    return xy[:, 0], xy[:, 1]
+
+
 def _line_data(ax):
     """x, y of every data line on ``ax`` (not the marker lines the helpers below add)."""
     for line in ax.get_lines():
         if line.get_gid() in ("semlab-outlier", "semlab-missing"):
             continue
-        x, y = (np.asarray(a, float) for a in line.get_data())
+        x, y = _xy(line)
         if x.size:
             yield line, x, y
 
@@ -158,8 +164,7 @@ def mark_missing(ax=None, *, label: str = "no value", lines=None):
 
     trans = mtransforms.blended_transform_factory(ax.transData, ax.transAxes)
     out = {"missing": [], "markers": []}
-    chosen = list(_line_data(ax)) if lines is None else [(ln, *(np.asarray(a, float) for a in ln.get_data()))
-                                                          for ln in lines]
+    chosen = list(_line_data(ax)) if lines is None else [(ln, *_xy(ln)) for ln in lines]
     first = True
     for line, x, y in chosen:
         gone = np.isfinite(x) & ~np.isfinite(y)

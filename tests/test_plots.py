@@ -151,3 +151,10 @@ def test_robust_ylim_labels_only_the_farthest_outliers():
     assert len(out["outliers"]) == 10
     labels = sorted(float(t.get_text()) for t in ax.texts)
     assert labels == [800.0, 900.0, 1000.0]                 # the three farthest
+
+
+def test_mark_missing_on_a_categorical_axis():
+    _, ax = plt.subplots()
+    ax.semilogy(["baseline", "12.5 pA", "3 pA"], [0.15, 0.28, np.nan], "o-", label="semlab")
+    out = plots.mark_missing(ax)
+    assert out["missing"] == [("semlab", 2.0)]          # "3 pA" is the third category, at x = 2
