@@ -545,6 +545,8 @@ def test_a_saved_notebook_reopens_with_its_widgets(notebook_page, lab):
             arg=[OVERVIEW_CLASS, MODEL_NOT_FOUND], timeout=60_000, polling=250)
         page.wait_for_timeout(3000)               # the manager gives up on a missing model after 2 s
         overview = page.locator(f".{OVERVIEW_CLASS}").first
+        if overview.count():
+            overview.scroll_into_view_if_needed()
         page.screenshot(path=str(OUTPUT / "reopened.png"))
     except Exception:
         _save_failure(page, lab)
