@@ -42,7 +42,8 @@ EXIT_CODES = f"""\
 exit codes:
   {EXIT_OK}    success (frames where the target was lost are rows with ok=False, not an error)
   {EXIT_INTERNAL}    internal error (a bug: please report it; set SEMLAB_DEBUG=1 for the traceback)
-  {EXIT_USAGE}    usage error: bad or missing options, malformed --roi/--click/--param values
+  {EXIT_USAGE}    usage error: bad or missing options, malformed --roi/--click values, unknown
+       --param keys or values of the wrong type (checked before anything is read)
   {EXIT_INPUT}    input error: missing file, empty folder, pattern without matches, unsupported
        format, unreadable or truncated image, frames of different sizes or pixel types
   {EXIT_ROI}    ROI error: --roi or --click (with --roi-size) not inside the frames, or too small
@@ -69,8 +70,10 @@ pixel size and where it came from, every input file with its SHA-256, frame coun
 SHA-256 of the CSV.
 
 INPUT is any mix of image files (PNG, TIFF, JPEG, BMP), multi-page TIFFs, videos (AVI, MP4, ...),
-folders (their image files in natural order: frame_2 before frame_10) and quoted glob patterns
-('run/frame_*.png'). Colour is converted to luminance; 16-bit frames stay 16-bit.
+folders and glob patterns ('run/frame_*.png'). All files are tracked in natural order (frame_2 before
+frame_10), also when the shell expanded a pattern as frame_0, frame_1, frame_10, frame_2; the command
+says on stderr when it re-ordered the files it was given (--keep-order keeps them as given). Colour is
+converted to luminance; 16-bit frames stay 16-bit.
 """
 
 TRACK_EXAMPLES = """\
@@ -182,6 +185,65 @@ def _param_arg(text: str):
     return key, parsed
 
 
+def _accepts(annotation, value) -> bool:
+    """Whether ``value`` (parsed from JSON or text) has the type a Tracker keyword is annotated with."""
+    import types
+    import typing
+
+    if annotation is typing.Any or annotation is None:
+        return annotation is typing.Any or value is None
+    if isinstance(annotation, types.UnionType) or typing.get_origin(annotation) is typing.Union:
+        return any(_accepts(a, value) for a in typing.get_args(annotation))
+    if annotation is type(None):
+        return value is None
+    if annotation is bool:
+        return isinstance(value, bool)
+    if annotation is int:  # 3 and 3.0 are whole numbers; True is not a count
+        return (isinstance(value, int) and not isinstance(value, bool)) or (
+            isinstance(value, float) and value.is_integer())
+    if annotation is float:
+        return isinstance(value, int | float) and not isinstance(value, bool)
+    if isinstance(annotation, type):
+        return isinstance(value, annotation)
+    return True  # an annotation this check does not know: the Tracker decides
+
+
+def _type_name(annotation) -> str:
+    import typing
+
+    args = typing.get_args(annotation)
+    if args:
+        return " or ".join(_type_name(a) for a in args)
+    return {type(None): "none"}.get(annotation, getattr(annotation, "__name__", str(annotation)))
+
+
+def _check_params(method: str, params: dict) -> None:
+    """Reject unknown ``--param`` keys, values of the wrong type and values the Tracker refuses (exit 2).
+
+    Types come from the annotations of :class:`semlab.Tracker`'s keywords, so a new keyword is checked
+    without a change here; the Tracker's own checks (ranges, choices) run after.
+    """
+    import inspect
+    import typing
+
+    from semlab.tracking import Tracker
+
+    hints = typing.get_type_hints(Tracker.__init__)
+    keywords = [n for n, p in inspect.signature(Tracker.__init__).parameters.items()
+                if p.kind is inspect.Parameter.KEYWORD_ONLY]
+    for key, value in params.items():
+        if key not in keywords:
+            raise _CLIError(EXIT_USAGE, f"--param {key}: not a tracker parameter; known: "
+                            + ", ".join(keywords))
+        if key in hints and not _accepts(hints[key], value):
+            raise _CLIError(EXIT_USAGE, f"--param {key}={json.dumps(value)}: {key} needs "
+                            f"{_type_name(hints[key])}, got {type(value).__name__}")
+    try:
+        Tracker(method, **params)
+    except (TypeError, ValueError) as e:
+        raise _CLIError(EXIT_USAGE, f"invalid tracker parameter: {e}") from None
+
+
 def _tracker_methods() -> tuple[tuple[str, ...], str]:
     """Methods of semlab.tracking and the best measured one (``Tracker()``'s default), the CLI's default.
 
@@ -264,7 +326,13 @@ def build_parser() -> argparse.ArgumentParser:
         default=[],
         metavar="KEY=VALUE",
         help="a tracker parameter (semlab.Tracker keyword, e.g. sigma=1.5, search_size=300, "
-        "threshold=none); VALUE is read as JSON, else as text; repeatable",
+        "threshold=none); VALUE is read as JSON, else as text, and must have the keyword's type; "
+        "repeatable",
+    )
+    t.add_argument(
+        "--keep-order",
+        action="store_true",
+        help="track the files in the order given instead of natural order (frame_2 before frame_10)",
     )
     t.add_argument(
         "--pixel-size",
@@ -334,15 +402,40 @@ def _check_output(out: Path) -> None:
         raise _CLIError(EXIT_OUTPUT, f"{out}: output folder {parent} is not writable")
 
 
-def _read(inputs, pixel_size_nm=None, progress=False):
+def _read(inputs, pixel_size_nm=None, progress=False, order="natural"):
     from semlab.io import FrameReadError, read_frames
 
     try:
-        return read_frames(inputs, pixel_size_nm=pixel_size_nm, progress=progress)
+        seq = read_frames(inputs, pixel_size_nm=pixel_size_nm, progress=progress, order=order)
     except FrameReadError as e:
         raise _CLIError(EXIT_INPUT, str(e)) from None
     except MemoryError:
         raise _CLIError(EXIT_INPUT, f"{inputs[0]}: not enough memory to hold the frames") from None
+    seq.pixel_size_source = _cli_words(seq.pixel_size_source)
+    return seq
+
+
+def _cli_words(text: str) -> str:
+    """A library message in the words of the command line: the flag a user types, not the keyword."""
+    from semlab.io import PIXEL_SIZE_HINT
+
+    return (text.replace(PIXEL_SIZE_HINT, "pass --pixel-size NM")
+            .replace("explicit pixel_size_nm", "--pixel-size"))
+
+
+def _note_reordering(seq) -> None:
+    """Say on stderr when natural order changed the order the files were given in."""
+    if not seq.meta.get("reordered"):
+        return
+    given = [Path(p).name for p in seq.meta["given_order"]]
+    used = [p.name for p in seq.files]
+    shown = ", ".join(used[:4]) + (", ..." if len(used) > 4 else "")
+    print(
+        f"semlab: note: the {len(given)} input files were not in natural order (given: "
+        f"{', '.join(given[:4])}{', ...' if len(given) > 4 else ''}); tracking them in natural "
+        f"order: {shown} (--keep-order keeps the order given)",
+        file=sys.stderr,
+    )
 
 
 def _check_roi(roi, shape, first: Path) -> None:
@@ -420,14 +513,12 @@ def _cmd_track(args, argv) -> int:
     _check_output(out)
     params = dict(args.param)
 
-    from semlab.tracking import Tracker, track
+    from semlab.tracking import track
 
-    try:  # reject unknown or bad parameters before reading anything
-        Tracker(args.method, **params)
-    except (TypeError, ValueError) as e:
-        raise _CLIError(EXIT_USAGE, f"invalid tracker parameter: {e}") from None
-
-    seq = _read(args.inputs, pixel_size_nm=args.pixel_size, progress=not args.no_progress)
+    _check_params(args.method, params)  # unknown or mistyped parameters: exit 2, before reading
+    seq = _read(args.inputs, pixel_size_nm=args.pixel_size, progress=not args.no_progress,
+                order="given" if args.keep_order else "natural")
+    _note_reordering(seq)
     first = seq.paths[0]
     shape = seq.frames.shape[1:]
     if args.click is not None:
@@ -489,6 +580,7 @@ def _cmd_track(args, argv) -> int:
                 "cwd": os.getcwd(),
                 "method": args.method,
                 "params": params,
+                "input_order": "given" if args.keep_order else "natural",
                 "roi": list(roi),
                 "roi_source": roi_source,
                 "roi_centre_px": [x0 + (w0 - 1) / 2, y0 + (h0 - 1) / 2],
