@@ -51,7 +51,7 @@ def test_notebook_is_stripped(path):
 
 
 # Notebooks whose conclusion their owners are still writing (issue 15 asks it of every notebook).
-PENDING_CONCLUSION = {"05_servo_step.ipynb"}
+PENDING_CONCLUSION = {"05_servo_step.ipynb", "08_evaluation.ipynb", "09_real_instrument.ipynb"}
 
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.name)
