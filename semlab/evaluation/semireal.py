@@ -42,6 +42,8 @@ __all__ = ["BACKGROUNDS", "NEEDLE_FRAMES", "SEMI_REAL_RANGES", "background_image
            "semi_real_sequence"]
 
 _CONTACT = "real-sem/contact_brightness_seq/{}.png"
+#: The frame taken before the first move lives beside the motion sequence, not in it (data/README.md).
+_REFERENCE = "real-sem/contact_brightness_reference/{}.png"
 #: Frames of contact_brightness_seq in which the needle stands free (before frame 5's contact).
 NEEDLE_FRAMES = ("needle_liftout_land_ib",) + tuple(f"liftout_contact_brightness_{i}_ib" for i in range(5))
 #: Needle segmentation: a pixel inside the needle's shaft in every source frame, and the gray level
@@ -106,6 +108,11 @@ def _real_frame(rel: str) -> np.ndarray:
                                     searchWindowSize=21).astype(np.float64)
 
 
+def _contact_path(frame_name: str) -> str:
+    """The data/ path of one of :data:`NEEDLE_FRAMES`."""
+    return (_REFERENCE if frame_name == NEEDLE_FRAMES[0] else _CONTACT).format(frame_name)
+
+
 @functools.cache
 def needle_cut_out(frame_name: str):
     """``(source, alpha, anchor_xy)`` of the needle in one contact frame (cached per process).
@@ -113,7 +120,7 @@ def needle_cut_out(frame_name: str):
     ``anchor_xy`` is the middle of the needle's end face: the rightmost column of the matte
     (alpha > 0.5) and the median row of the matte within 6 px of it.
     """
-    src = _real_frame(_CONTACT.format(frame_name))
+    src = _real_frame(_contact_path(frame_name))
     alpha = cut_out_object(src, NEEDLE_SEED_XY, threshold=NEEDLE_THRESHOLD)
     ys, xs = np.nonzero(alpha > 0.5)
     x_end = xs.max()
@@ -126,7 +133,7 @@ def background_image(name: str, needle_frame: str, crop_fraction, flip_lr: bool,
     rel, (x0, y0, x1, y1) = BACKGROUNDS[name]
     if rel is None:  # the next contact frame after the needle's, cyclically
         other = NEEDLE_FRAMES[(NEEDLE_FRAMES.index(needle_frame) + 1) % len(NEEDLE_FRAMES)]
-        rel = _CONTACT.format(other)
+        rel = _contact_path(other)
     img = _real_frame(rel)[y0:y1, x0:x1]
     fx, fy = crop_fraction
     cx = round(fx * (img.shape[1] - WIDTH))
