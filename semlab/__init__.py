@@ -7,6 +7,7 @@ The handful of calls a notebook or a script needs, after Ru et al. (2012),
   :func:`identify_contour_template`, :func:`adaptive_canny_thresholds`
 - control: :func:`characterise_hysteresis`, :func:`fit_hysteresis`, :func:`step_response`,
   :func:`step_metrics`
+- evaluation: :func:`evaluate` (the scene-family corpus, :mod:`semlab.evaluation`)
 - data: :func:`read_frames`, :func:`read_image`, :func:`load_sample` (the samples in ``data/``)
 - widgets: :class:`TemplateExplorer`, :class:`TrackingPlayer`, :class:`ServoPanel`; figures in :mod:`semlab.plots`
 - the simulated rig lives in :mod:`semlab.sim`, the hardware protocols in :mod:`semlab.protocols`.
@@ -30,6 +31,8 @@ _EXPORTS = {
     "canny_edges": "semlab.edges",
     "gradient_subpixel_shift": "semlab.subpixel",
     "tracking_errors": "semlab.metrics",
+    # the scene-family corpus every tracking figure is measured on
+    "evaluate": "semlab.evaluation",
     "MatchTemplatePeer": "semlab.peers",
     "ECCPeer": "semlab.peers",
     "PhaseCorrelationPeer": "semlab.peers",
@@ -67,6 +70,9 @@ _EXPORTS = {
     # protocols
     "Microscope": "semlab.protocols",
     "Axis": "semlab.protocols",
+    # closed-loop positioners (FIB/SEM manipulators, semlab.instruments)
+    "Positioner": "semlab.protocols",
+    "calibrate_positioner": "semlab.positioning",
 }
 
 __all__ = sorted(_EXPORTS) + ["__version__"]  # noqa: PLE0605 (built from the lazy export table)

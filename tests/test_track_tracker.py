@@ -103,6 +103,16 @@ def test_tracker_signature_keeps_the_contract():
     assert Tracker(method="contour", **CONTRACT).options.contour.subpixel is True  # every keyword accepted
 
 
+def test_options_read_as_attributes_and_stay_fixed():
+    t = Tracker("contour", search_size=250, canny_sigma=1.5)
+    assert t.search_size == 250 and t.subpixel is True and t.min_score == 0.3  # normalised, per method
+    assert t.canny == {"sigma": 1.5, "low": None, "high": None} and t.template_params["sigma"] == 2.0
+    with pytest.raises(AttributeError, match="fixed at construction"):
+        t.search_size = 400  # would be read by nothing: refused, not ignored
+    with pytest.raises(AttributeError):
+        t.no_such_option  # noqa: B018
+
+
 def test_unknown_tracker_keywords_are_refused_with_the_allowed_ones():
     with pytest.raises(TypeError, match="unknown keyword") as err:
         Tracker(search_sise=200, band_px=3)

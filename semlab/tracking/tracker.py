@@ -14,7 +14,7 @@ from .band import MIN_BAND_PIXELS, background_texture, band_widths, registration
 from .frames import as_frame
 from .ic import ICMethod
 from .method import Method, Motion, Setup, Verdict
-from .options import DEFAULT_METHOD, TrackerOptions
+from .options import DEFAULT_METHOD, KEYWORD_GROUP, TrackerOptions
 from .paper import ContourMethod, HBMethod, SSDMethod
 from .result import TrackResult
 from .search import search_window
@@ -199,6 +199,26 @@ class Tracker:
         (:func:`semlab.tracking.band.band_widths`)."""
         return band_widths(self.options.band, self.method, self.texture)
 
+    # ------------------------------------------------------------------ the options as attributes
+    def __getattr__(self, name: str):
+        """Every option reads as an attribute, as before the groups (``t.search_size``; ``t.canny``
+        and ``t.template_params``: the keywords of the Canny and the template identification)."""
+        options = self.__dict__.get("options")
+        if options is not None:
+            if name in KEYWORD_GROUP:
+                return getattr(getattr(options, KEYWORD_GROUP[name]), name)
+            if name == "canny":
+                return options.contour.canny_kwargs()
+            if name == "template_params":
+                return options.template.as_kwargs()
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+
+    def __setattr__(self, name: str, value):
+        if name in KEYWORD_GROUP or name in ("canny", "template_params"):
+            # A changed attribute that the tracker no longer reads would be a silent error.
+            raise AttributeError(f"the Tracker's options are fixed at construction: make a new Tracker({name}=...)")
+        super().__setattr__(name, value)
+
     # ------------------------------------------------------------------ what the method holds
     @property
     def contour(self) -> ContourTemplate:
@@ -214,6 +234,21 @@ class Tracker:
     def template(self) -> np.ndarray:
         """The template the method matches (``"ic"``: averaged over the first frames)."""
         return self.algorithm.template
+
+    @property
+    def shift(self) -> np.ndarray:
+        """The template's last shift against the ROI (:attr:`motion`)."""
+        return self.motion.shift
+
+    @property
+    def velocity(self) -> np.ndarray:
+        """The last frame-to-frame shift (:attr:`motion`)."""
+        return self.motion.velocity
+
+    @property
+    def origin(self) -> np.ndarray:
+        """Where the template sits in frame 0: positions are ``centre0 + shift − origin``."""
+        return self.algorithm.origin
 
     @property
     def lost(self) -> bool:
