@@ -512,15 +512,25 @@ def _cmd_track(args, argv) -> int:
     sidecar = out.with_name(out.name + ".json")
     _check_output(out)
     params = dict(args.param)
-
-    from semlab.tracking import track
-
     _check_params(args.method, params)  # unknown or mistyped parameters: exit 2, before reading
     seq = _read(args.inputs, pixel_size_nm=args.pixel_size, progress=not args.no_progress,
                 order="given" if args.keep_order else "natural")
     _note_reordering(seq)
+    roi, roi_source = _track_roi(args, seq)
+    res = _track_table(_run_tracker(args, seq, roi, params), seq)
+
+    def record(tmp_csv: Path) -> dict:
+        return _track_record(args, argv, params, seq, res, roi, roi_source, out, tmp_csv, started)
+
+    written = _write_atomically(res, out, sidecar, record)
+    if not args.quiet:
+        _print_track_summary(args, seq, res, roi, written, out, sidecar)
+    return EXIT_OK
+
+
+def _track_roi(args, seq) -> tuple[tuple, str]:
+    """The ROI (``--roi``, or ``--click`` with ``--roi-size``) checked against the frames, and how it was given."""
     first = seq.paths[0]
-    shape = seq.frames.shape[1:]
     if args.click is not None:
         from semlab.roi import roi_from_click
 
@@ -536,24 +546,32 @@ def _cmd_track(args, argv) -> int:
     else:
         roi = args.roi
         roi_source = "--roi"
-    _check_roi(roi, shape, first)
+    _check_roi(roi, seq.frames.shape[1:], first)
+    return roi, roi_source
+
+
+def _run_tracker(args, seq, roi, params):
+    from semlab.tracking import track
 
     try:
         df = track(seq.frames, roi, method=args.method, progress=not args.no_progress, **params)
     except (TypeError, ValueError) as e:
         msg = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
         raise _CLIError(
-            EXIT_TRACKING, f"{first}: tracking cannot start in ROI {roi}: {msg}"
+            EXIT_TRACKING, f"{seq.paths[0]}: tracking cannot start in ROI {roi}: {msg}"
         ) from None
+    if len(df) != len(seq):
+        raise _CLIError(EXIT_INTERNAL, f"tracker returned {len(df)} rows for {len(seq)} frames")
+    return df
 
+
+def _track_table(df, seq):
+    """The CSV's table: the track in px and nm, and each frame's file."""
     import numpy as np
     import pandas as pd
 
-    if len(df) != len(seq):
-        raise _CLIError(EXIT_INTERNAL, f"tracker returned {len(df)} rows for {len(seq)} frames")
-    ps = seq.pixel_size_nm
-    scale = np.nan if ps is None else ps
-    res = pd.DataFrame(
+    scale = np.nan if seq.pixel_size_nm is None else seq.pixel_size_nm
+    return pd.DataFrame(
         {
             "frame": df["frame"].astype(int).to_numpy(),
             "x": df["x"].astype(float).to_numpy(),
@@ -566,52 +584,61 @@ def _cmd_track(args, argv) -> int:
         }
     )
 
+
+def _track_record(args, argv, params, seq, res, roi, roi_source, out, tmp_csv, started) -> dict:
+    """The JSON sidecar: how the CSV was made (command, parameters, inputs and their hashes)."""
+    shape = seq.frames.shape[1:]
+    n_ok = int(res["ok"].sum())
+    x0, y0, w0, h0 = roi
+    return {
+        "semlab_version": _version(),
+        "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
+        "command": ["semlab", *argv],
+        "cwd": os.getcwd(),
+        "method": args.method,
+        "params": params,
+        "input_order": "given" if args.keep_order else "natural",
+        "roi": list(roi),
+        "roi_source": roi_source,
+        "roi_centre_px": [x0 + (w0 - 1) / 2, y0 + (h0 - 1) / 2],
+        "click": None if args.click is None else list(args.click),
+        "pixel_size_nm": seq.pixel_size_nm,
+        "pixel_size_source": seq.pixel_size_source,
+        "n_frames": len(res),
+        "n_ok": n_ok,
+        "n_lost": len(res) - n_ok,
+        "frame_size_px": [int(shape[1]), int(shape[0])],
+        "dtype": str(seq.frames.dtype),
+        "inputs": [
+            {
+                "path": str(Path(f).resolve()),
+                "sha256": _sha256(f),
+                "bytes": Path(f).stat().st_size,
+                "frames": int(sum(1 for p in seq.paths if p == f)),
+            }
+            for f in seq.files
+        ],
+        "output": {
+            "csv": out.name,
+            "sha256": _sha256(tmp_csv),
+            "columns": list(res.columns),
+            "units": {"x": "px", "y": "px", "x_nm": "nm", "y_nm": "nm", "score": "1"},
+        },
+        "conventions": "x, y: where the ROI centre point of frame 0 has moved to; pixel "
+        "centres at integer coordinates, x right, y down; x_nm = x * pixel_size_nm",
+        "environment": _environment(),
+        "elapsed_s": round(time.time() - started, 3),
+    }
+
+
+def _write_atomically(res, out: Path, sidecar: Path, make_record) -> dict:
+    """Write the CSV and its sidecar (``make_record(csv written so far)``) through temporary files,
+    so that a failure leaves neither half-written; returns the record."""
     tmp_csv, tmp_json = _tmp_name(out), _tmp_name(sidecar)
     try:
         try:
             res.to_csv(tmp_csv, index=False, float_format="%.6f", lineterminator="\n")
-            n_ok = int(res["ok"].sum())
-            files = seq.files
-            x0, y0, w0, h0 = roi
-            record = {
-                "semlab_version": _version(),
-                "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
-                "command": ["semlab", *argv],
-                "cwd": os.getcwd(),
-                "method": args.method,
-                "params": params,
-                "input_order": "given" if args.keep_order else "natural",
-                "roi": list(roi),
-                "roi_source": roi_source,
-                "roi_centre_px": [x0 + (w0 - 1) / 2, y0 + (h0 - 1) / 2],
-                "click": None if args.click is None else list(args.click),
-                "pixel_size_nm": ps,
-                "pixel_size_source": seq.pixel_size_source,
-                "n_frames": len(res),
-                "n_ok": n_ok,
-                "n_lost": len(res) - n_ok,
-                "frame_size_px": [int(shape[1]), int(shape[0])],
-                "dtype": str(seq.frames.dtype),
-                "inputs": [
-                    {
-                        "path": str(Path(f).resolve()),
-                        "sha256": _sha256(f),
-                        "bytes": Path(f).stat().st_size,
-                        "frames": int(sum(1 for p in seq.paths if p == f)),
-                    }
-                    for f in files
-                ],
-                "output": {
-                    "csv": out.name,
-                    "sha256": _sha256(tmp_csv),
-                    "columns": list(res.columns),
-                    "units": {"x": "px", "y": "px", "x_nm": "nm", "y_nm": "nm", "score": "1"},
-                },
-                "conventions": "x, y: where the ROI centre point of frame 0 has moved to; pixel "
-                "centres at integer coordinates, x right, y down; x_nm = x * pixel_size_nm",
-                "environment": _environment(),
-                "elapsed_s": round(time.time() - started, 3),
-            }
+            record = make_record(tmp_csv)
             tmp_json.write_text(json.dumps(record, indent=1, default=str) + "\n")
             os.replace(tmp_json, sidecar)
             os.replace(tmp_csv, out)
@@ -623,27 +650,30 @@ def _cmd_track(args, argv) -> int:
         for tmp in (tmp_csv, tmp_json):
             if tmp.exists():
                 tmp.unlink()
+    return record
 
-    if not args.quiet:
-        ok = res["ok"]
-        print(
-            f"tracked {len(res)} frames from {len(seq.files)} file(s) with method {args.method!r}, ROI {roi}"
-        )
-        print(f"pixel size: {_fmt_ps(ps, seq.pixel_size_source)}")
-        if n_ok:
-            last = res[ok].iloc[-1]
-            dx, dy = last.x - record["roi_centre_px"][0], last.y - record["roi_centre_px"][1]
-            line = f"ok in {n_ok}/{len(res)} frames; last ok frame {int(last.frame)}: x={last.x:.3f}, y={last.y:.3f} px"
-            line += f", displacement ({dx:+.3f}, {dy:+.3f}) px"
-            if ps is not None:
-                line += f" = ({dx * ps:+.1f}, {dy * ps:+.1f}) nm"
-            print(line)
-        if n_ok < len(res):
-            lost = res.loc[~ok, "frame"].tolist()
-            shown = ", ".join(map(str, lost[:10])) + (" ..." if len(lost) > 10 else "")
-            print(f"target lost (ok=False) in {len(lost)} frame(s): {shown}")
-        print(f"wrote {out} and {sidecar.name}")
-    return EXIT_OK
+
+def _print_track_summary(args, seq, res, roi, record, out, sidecar) -> None:
+    ps = seq.pixel_size_nm
+    ok = res["ok"]
+    n_ok = int(ok.sum())
+    print(
+        f"tracked {len(res)} frames from {len(seq.files)} file(s) with method {args.method!r}, ROI {roi}"
+    )
+    print(f"pixel size: {_fmt_ps(ps, seq.pixel_size_source)}")
+    if n_ok:
+        last = res[ok].iloc[-1]
+        dx, dy = last.x - record["roi_centre_px"][0], last.y - record["roi_centre_px"][1]
+        line = f"ok in {n_ok}/{len(res)} frames; last ok frame {int(last.frame)}: x={last.x:.3f}, y={last.y:.3f} px"
+        line += f", displacement ({dx:+.3f}, {dy:+.3f}) px"
+        if ps is not None:
+            line += f" = ({dx * ps:+.1f}, {dy * ps:+.1f}) nm"
+        print(line)
+    if n_ok < len(res):
+        lost = res.loc[~ok, "frame"].tolist()
+        shown = ", ".join(map(str, lost[:10])) + (" ..." if len(lost) > 10 else "")
+        print(f"target lost (ok=False) in {len(lost)} frame(s): {shown}")
+    print(f"wrote {out} and {sidecar.name}")
 
 
 # ----------------------------------------------------------------------------------------------

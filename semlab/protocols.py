@@ -207,3 +207,25 @@ def frame_time(microscope, frame_index: int, t0: float | None = None) -> float:
     if stamp is not None and math.isfinite(stamp):
         return float(stamp - (stamp if t0 is None else t0))
     return float(frame_index * float(microscope.frame_period))
+
+
+@runtime_checkable
+class VisualTracker(Protocol):
+    """Measures where the target is in each frame: what the experiments and the visual servo read.
+
+    :class:`semlab.tracking.Tracker`, the :mod:`semlab.peers` trackers and anything with these two
+    methods. ``update`` returns an object with ``x``, ``y``, ``ok`` (and ``score``) attributes,
+    such as :class:`semlab.tracking.TrackResult`, or a tuple ``(x, y, score, ok)``
+    (:func:`semlab.measure.read_result` reads either).
+    """
+
+    def init(self, frame: np.ndarray, roi) -> object:
+        """Take the target from ``frame`` inside ``roi = (x, y, w, h)``."""
+        ...
+
+    def update(self, frame: np.ndarray) -> object:
+        """Locate the target in the next frame (never raising for a lost one: ``ok`` is False)."""
+        ...
+
+
+__all__ += ["VisualTracker"]

@@ -29,6 +29,7 @@ from .edges import adaptive_canny_thresholds, canny_edges
 from .plots import figure_png, plot_step_response, plot_track_xy, show_edges, show_frame
 from .roi import as_gray_float, check_roi, clip_window, find_motion_roi, roi_centre, roi_from_click
 from .template import identify_contour_template, to_uint8
+from .tracking.options import CANNY_SIGMA
 
 __all__ = ["ServoPanel", "TemplateExplorer", "TrackingPlayer", "display_to_frame", "explore_template",
            "overview_image", "player_state"]
@@ -65,7 +66,7 @@ def _png_figure(nrows, ncols, size, **adjust):
 # ---------------------------------------------------------------------------------------------
 
 def explore_template(frame, roi, *, sigma=2.0, threshold=None, morph_kernel=3, morph_iterations=1,
-                     canny_sigma=1.0, canny_low=None, canny_high=None) -> dict:
+                     canny_sigma=CANNY_SIGMA, canny_low=None, canny_high=None) -> dict:
     """Everything the template explorer shows for one set of parameters.
 
     Runs :func:`semlab.template.identify_contour_template` on the ROI (paper, Fig. 2) and
@@ -299,7 +300,7 @@ class TemplateExplorer:
 
     def __init__(self, frame, roi=None, *, click=None, roi_size=200, pixel_size_nm=None, motion_frames=None,
                  overview_width=440, sigma=2.0, threshold=None, morph_kernel=3, morph_iterations=1,
-                 canny_sigma=1.0, canny_low=None, canny_high=None):
+                 canny_sigma=CANNY_SIGMA, canny_low=None, canny_high=None):
         import ipywidgets as w
 
         try:

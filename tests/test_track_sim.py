@@ -104,7 +104,7 @@ def test_fluctuation_and_clutter_moving_probe_near_the_bound(kind, seed):
     "and 2.77x on clutter_occluder with the probe moving (seeds 0-5: 1.4-8.2x; seeds 0, 2, 4 within 2x; "
     "seed 1 has a particle touching the apex, seed 3 a thin probe nearly parallel to x). The static "
     "background beside the object pulls the estimate back while the probe is within a few px of where the "
-    "template was taken. A matter for semlab/tracking.py."))
+    "template was taken. A matter for semlab/tracking/."))
 def test_fluctuation_and_clutter_moving_probe_near_the_bound_particle_at_the_apex():
     assert all(_moving_stats(kind, seed=1)["rmse"] <= 2.0 * _moving_stats(kind, seed=1)["crb"]
                for kind in ("gray_fluctuation", "clutter_occluder"))
@@ -153,7 +153,7 @@ def test_roi_from_motion_on_the_rig():
     "known limitation (measured): at low dose (10 pA) a thin probe nearly parallel to x (seed 1) carries "
     "its x information in the apex only; the fit scatters along the shaft (median error 0.76 px, max 4.62) "
     "while the score stays normal, so 3 of 30 frames are > 2 px off with ok=True (seed 3: 2, max 2.38). "
-    "A matter for semlab/tracking.py."))
+    "A matter for semlab/tracking/."))
 def test_low_dose_thin_probe_is_followed_or_flagged():
     # Either the tracker follows (error <= 2 px, ~9x this bound) or it says it cannot (ok=False):
     # no frame may be more than 2 px off while flagged ok.
