@@ -1,0 +1,70 @@
+"""The mutation table per core module from the last `make mutate` (reads mutants/*.meta).
+
+Run from the repository root after ``mutmut run``::
+
+    python benchmarks/mutation_report.py            # the table
+    python benchmarks/mutation_report.py --survivors semlab/control.py   # the surviving mutants' names
+
+"Killed" counts mutants a test failed on, plus timeouts (a mutant that makes the tests hang is
+caught); "no tests" are mutants in code no selected test calls (they count as not killed).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tomllib
+from collections import Counter
+from pathlib import Path
+
+import pandas as pd
+
+KILLED = {1, 3, 36, 24, -24, 152, 255}  # mutmut's exit codes for killed and timeout
+SURVIVED = {0}
+NO_TESTS = {5, 33}
+
+
+def load(root: Path = Path(".")) -> dict[str, dict[str, int | None]]:
+    config = tomllib.loads((root / "pyproject.toml").read_text())["tool"]["mutmut"]
+    out = {}
+    for module in config["only_mutate"]:
+        for path in sorted(root.glob(module)):
+            meta = root / "mutants" / f"{path.relative_to(root)}.meta"
+            if meta.exists():
+                out[str(path.relative_to(root))] = json.loads(meta.read_text())["exit_code_by_key"]
+    return out
+
+
+def table(results: dict[str, dict[str, int | None]]) -> pd.DataFrame:
+    rows = []
+    for module, codes in results.items():
+        c = Counter("killed" if v in KILLED else "survived" if v in SURVIVED else "no tests" if v in NO_TESTS
+                    else "not checked" if v is None else "other" for v in codes.values())
+        checked = len(codes) - c["not checked"]
+        rows.append({"module": module, "mutants": len(codes), "killed": c["killed"], "survived": c["survived"],
+                     "no_tests": c["no tests"], "not_checked": c["not checked"], "other": c["other"],
+                     "killed_pct": round(100.0 * c["killed"] / checked, 1) if checked else float("nan")})
+    return pd.DataFrame(rows)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--survivors", metavar="MODULE", help="list the surviving mutants of this module")
+    parser.add_argument("--prefix", default="", help="only mutants whose name starts with this")
+    args = parser.parse_args(argv)
+    results = load()
+    if not results:
+        print("no mutation results: run `make mutate` first", file=sys.stderr)
+        return 1
+    if args.survivors:
+        for name, code in sorted(results[args.survivors].items()):
+            if code in SURVIVED | NO_TESTS and name.startswith(args.prefix):
+                print(name, "survived" if code in SURVIVED else "no tests")
+        return 0
+    print(table(results).to_string(index=False))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
