@@ -78,6 +78,43 @@ def test_eq_9_recovers_a_sub_pixel_shift(shift):
     assert (dx, dy) == pytest.approx(shift, abs=0.04)
 
 
+def wedge(shape=(60, 80), tip=(50.0, 30.0), half_angle_deg=14.0, sigma=1.5):
+    """A probe-like wedge entering from the left border (its shaft is cut by the window)."""
+    yy, xx = np.mgrid[: shape[0], : shape[1]].astype(float)
+    vx, vy = xx - tip[0], yy - tip[1]
+    a = np.radians(half_angle_deg)
+    d1, d2 = vx * np.sin(a) + vy * np.cos(a), vx * np.sin(a) - vy * np.cos(a)
+    d = np.where((d1 > 0) & (d2 > 0), np.hypot(vx, vy), np.maximum(d1, d2))
+    return 60 + 140 * ndtr(-d / sigma)
+
+
+@pytest.mark.parametrize("shift", [(0.3, -0.2), (-0.25, 0.15), (0.1, 0.3)])
+def test_eq_9_on_a_probe_cut_by_the_window(shift):
+    # No symmetry to cancel the second-order term here: the error is |d|²/(2σ) <= 0.36²/3 ≈ 0.04 px.
+    # (On a disc inside a uniform background Σ i ∇i = 0, which would hide a sign error of the
+    # residual; a shaft that leaves the window does not.)
+    dx, dy = gradient_subpixel_shift(wedge(), wedge(tip=(50 + shift[0], 30 + shift[1])))
+    assert (dx, dy) == pytest.approx(shift, abs=0.04)
+
+
+def test_eq_9_is_the_least_squares_solution_over_the_inner_pixels():
+    # eq. 9 = the 2x2 normal equations of min Σ (t - i - Δ·∇i)² over R (all but a 2-px border),
+    # ∇i by the 5-point mask: the same numbers as a generic least-squares solver, to rounding
+    t = wedge().astype(np.float32)
+    i = wedge(tip=(50.2, 29.9)).astype(np.float32)
+    ix, iy = five_point_gradients(i)
+    rng = np.random.default_rng(5)
+    mask = rng.random(t.shape) < 0.7
+    for m in (None, mask):
+        use = np.zeros(t.shape, bool)
+        use[2:-2, 2:-2] = True
+        if m is not None:
+            use &= m
+        a = np.stack([ix[use], iy[use]], 1).astype(np.float64)
+        want = np.linalg.lstsq(a, (t - i)[use].astype(np.float64), rcond=None)[0]
+        assert gradient_subpixel_shift(t, i, mask=m) == pytest.approx(tuple(want), rel=1e-9, abs=1e-12)
+
+
 def test_eq_9_uses_the_mask_and_ignores_the_two_pixel_border():
     template = disc()
     target = disc(centre=(32.3, 31.8))
