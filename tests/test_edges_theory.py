@@ -100,3 +100,18 @@ def test_canny_threshold_validation():
     for kw in ({"low": 1.0}, {"high": 1.0}):
         with pytest.raises(ValueError, match=r"^give both low and high thresholds, or neither"):
             canny_edges(gray, **kw)
+
+
+def test_canny_on_a_texture_depends_on_every_threshold_and_on_sigma():
+    # A blurred random texture has gradients at every level, so the edge map changes with each
+    # threshold and with the smoothing (a disc's clean edge would hide such changes).
+    rng = np.random.default_rng(0)
+    tex = cv2.GaussianBlur(rng.uniform(0, 255, (96, 96)).astype(np.uint8), (0, 0), 1.5)
+    for sigma in (1.0, 2.0):
+        dx, dy = reference_gradients(tex, sigma)
+        low, high = reference_thresholds(tex, sigma)
+        assert reference_thresholds(tex, 1.0) != pytest.approx(reference_thresholds(tex, 2.0), rel=0.05)
+        np.testing.assert_array_equal(canny_edges(tex, sigma=sigma), cv2.Canny(dx, dy, low, high, L2gradient=True) > 0)
+        np.testing.assert_array_equal(canny_edges(tex, low=5.0, high=high, sigma=sigma),
+                                      cv2.Canny(dx, dy, 5.0, high, L2gradient=True) > 0)
+        assert (canny_edges(tex, low=5.0, high=high, sigma=sigma) != canny_edges(tex, sigma=sigma)).any()

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 from scipy.special import ndtr
@@ -92,6 +93,24 @@ def test_contour_tolerance_dilates_the_edges_by_that_many_pixels():
     assert contour_match(edges, mask, tolerance_px=2)[3][3, 4] == pytest.approx(1.0, abs=1e-6)
 
 
+def test_contour_tolerance_is_a_disc_in_both_directions():
+    # one contour pixel, one edge pixel: the score at an offset (dx, dy) is 1 exactly when the
+    # offset lies in the elliptical (disc) structuring element of radius tolerance_px
+    mask = np.zeros((3, 3), bool)
+    mask[1, 1] = True
+    edges = np.zeros((21, 21), bool)
+    edges[10, 10] = True
+    for tol in (1, 2, 3):
+        scores = contour_match(edges, mask, tolerance_px=tol)[3]  # template pixel at (x + 1, y + 1)
+        disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * tol + 1, 2 * tol + 1)).astype(bool)
+        got = scores[9 - tol:10 + tol, 9 - tol:10 + tol] > 0.5
+        np.testing.assert_array_equal(got, disc)
+        assert (scores > 0.5).sum() == disc.sum()  # nothing outside the disc
+    # radius 2: (2, 0) and (0, 2) are inside, the corner (2, 2) is not (a square would take it)
+    scores = contour_match(edges, mask, tolerance_px=2)[3]
+    assert scores[9, 11] > 0.5 and scores[11, 9] > 0.5 and scores[11, 11] < 0.5
+
+
 def test_contour_ties_are_broken_towards_the_preferred_offset():
     # a straight edge matches equally well along itself: the score map has a ridge of ties
     mask = np.zeros((5, 5), bool)
@@ -102,6 +121,12 @@ def test_contour_ties_are_broken_towards_the_preferred_offset():
     assert score == pytest.approx(1.0, abs=1e-6) and y == 4 and x == 0  # first in raster order by default
     assert contour_match(edges, mask, prefer=(9.2, 4.0))[:2] == (9, 4)
     assert contour_match(edges, mask, prefer=(100.0, -3.0))[:2] == (15, 4)  # nearest tie
+    # ties in two dimensions: the nearest by Euclidean distance, whatever the direction
+    blob = np.ones((12, 20), bool)
+    dot = np.zeros((3, 3), bool)
+    dot[1, 1] = True
+    for prefer, want in (((3.0, 8.0), (3, 8)), ((16.4, 0.2), (16, 0)), ((-5.0, 4.0), (0, 4)), ((9.0, 30.0), (9, 9))):
+        assert contour_match(blob, dot, prefer=prefer)[:2] == want
     # a tie means equal counts: a placement one contour pixel short (score 4/5) is not a tie
     edges[6, 15:] = False
     assert contour_match(edges, mask, prefer=(15.0, 4.0))[:2] == (10, 4)
@@ -122,6 +147,21 @@ def test_offline_matrix_stacks_the_five_point_gradients_of_the_pixels():
     m0m = offline_matrix(t, mask)
     assert m0m.shape == (350, 2) and m0m.dtype == np.float64
     np.testing.assert_array_equal(m0m, np.stack([ix[mask], iy[mask]], 1))
+
+
+def test_integer_images_and_masks_are_taken_as_numbers():
+    # uint8 frames must not wrap around in I(f(R; μ)) - I(R): the increment is computed in floats;
+    # a 0/1 integer mask selects pixels like a boolean one
+    t = disc()
+    w = disc(centre=(25.3, 24.8))
+    t8, w8 = np.round(t).astype(np.uint8), np.round(w).astype(np.uint8)
+    np.testing.assert_allclose(hager_belhumeur_increment(t8, w8),
+                               hager_belhumeur_increment(np.round(t), np.round(w)), rtol=1e-12)
+    mask = np.zeros(t.shape, np.uint8)
+    mask[10:20, 5:40] = 1
+    np.testing.assert_array_equal(offline_matrix(t, mask), offline_matrix(t, mask.astype(bool)))
+    np.testing.assert_allclose(hager_belhumeur_increment(t, w, mask=mask),
+                               hager_belhumeur_increment(t, w, mask=mask.astype(bool)), rtol=1e-12)
 
 
 def test_increment_is_the_least_squares_solution_of_eq_5():
