@@ -26,7 +26,8 @@ def test_as_gray_float_keeps_the_values_as_c_contiguous_float32():
         np.testing.assert_array_equal(out, arr.astype(np.float32))
     with pytest.raises(ValueError, match=r"^probe frame holds NaN or infinite pixels$"):
         as_gray_float(np.array([[1.0, np.inf]]), name="probe frame")
-    with pytest.raises(ValueError, match=r"^frame has shape \(4, 4, 4\): an RGB\(A\) frame"):
+    with pytest.raises(ValueError, match=r"^frame has shape \(4, 4, 4\): an RGB\(A\) frame; convert it to gray "
+                       r"first \(e\.g\. semlab\.io\.read_image does\)$"):
         as_gray_float(np.zeros((4, 4, 4)))
     with pytest.raises(ValueError, match=r"^frame must be a 2-D gray image"):
         as_gray_float(np.zeros((4, 4, 2)))
@@ -40,6 +41,8 @@ def test_check_roi_limits_are_inclusive():
     assert check_roi((112, 92, 8, 8), shape) == (112, 92, 8, 8)  # touching the far corner, 8 px
     assert check_roi((10.4, 19.6, 30.2, 40.0), shape) == (10, 20, 30, 40)  # rounded
     assert check_roi((0, 0, 5, 5), shape, min_size=5) == (0, 0, 5, 5)
+    assert check_roi((0, 0, 120, 100), (100, 120, 3)) == (0, 0, 120, 100)  # an RGB shape's first two
+    assert clip_window(500, 500, 20, 10, (100, 120, 3)) == (100, 90, 20, 10)
     for roi in ((113, 0, 8, 8), (0, 93, 8, 8), (0, -1, 8, 8)):
         with pytest.raises(ValueError, match=r"^roi .* is not wholly inside the 120x100 image$"):
             check_roi(roi, shape)
@@ -145,6 +148,38 @@ def test_roi_from_motion_takes_the_tip_of_a_region_entering_from_the_border():
     bottom = [f[::-1].copy() for f in top]
     _, yb, _, _ = roi_from_motion(bottom, size=20, sigma=0)
     assert 119 - 60 <= yb + 9.5 <= 119 - 58
+
+
+def test_the_background_is_the_per_pixel_median():
+    # a textured static background: only the per-pixel median cancels it (a single global level
+    # would leave the texture as "motion")
+    rng = np.random.default_rng(3)
+    background = rng.uniform(20, 220, (80, 100))
+    frames = [background + (f - 40.0) for f in _stack_with_a_moving_square()]
+    np.testing.assert_allclose(motion_energy(frames, sigma=0)[:20], 0.0, atol=1e-4)  # rows without the square
+    assert roi_from_motion(frames, size=20) == clip_window(65 + 4.5, 34.5, 20, 20, (80, 100))
+
+
+def test_roi_from_motion_picks_the_largest_moving_region_and_needs_three_frames():
+    shape = (80, 100)
+    frames = [np.zeros(shape) for _ in range(3)]
+    frames[-1] = frames[-1].copy()
+    frames[-1][10:14, 10:14] = 50.0  # small blob: label 1 in raster order
+    frames[-1][40:56, 60:76] = 50.0  # the larger one: label 2
+    assert roi_from_motion(frames, size=20, sigma=0) == clip_window(67.5, 47.5, 20, 20, shape)
+    assert roi_from_motion(frames, sigma=0)[2:] == (100, 80)  # default 200 px, clipped to the frame
+    # a faint change (0.8 gray levels) on a still, noise-free background is still motion
+    faint = [np.zeros(shape) for _ in range(3)]
+    faint[-1] = faint[-1].copy()
+    faint[-1][40:56, 60:76] = 0.8
+    assert roi_from_motion(faint, size=20, sigma=0) == clip_window(67.5, 47.5, 20, 20, shape)
+    # the peak must reach 5x the median change: a uniform change of 1 with a blob of 5.5 passes
+    level = [np.zeros(shape), np.zeros(shape), np.ones(shape)]
+    level[-1][40:56, 60:76] = 5.5
+    assert roi_from_motion(level, size=20, sigma=0) == clip_window(67.5, 47.5, 20, 20, shape)
+    level[-1][40:56, 60:76] = 4.5
+    with pytest.raises(ValueError, match="no motion found"):
+        roi_from_motion(level, size=20, sigma=0)
 
 
 def test_roi_from_motion_refuses_still_or_too_few_frames():

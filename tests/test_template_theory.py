@@ -68,6 +68,7 @@ def test_the_default_pipeline_is_the_papers_steps():
 
 
 @pytest.mark.parametrize("kw", [{"sigma": 0.0}, {"sigma": 1.0}, {"threshold": 120.0}, {"morph_kernel": 5},
+                                {"morph_kernel": 2},
                                 {"morph_kernel": 1}, {"morph_kernel": 0}, {"morph_iterations": 0},
                                 {"morph_iterations": 2}])
 def test_every_parameter_acts_as_documented(kw):
@@ -97,6 +98,16 @@ def test_a_dark_object_needs_bright_object_false():
     check(dark, reference(gray, bright=False))
     bright = identify_contour_template(255 - gray)
     assert dark.area == pytest.approx(bright.area, rel=0.02)
+    fixed = identify_contour_template(gray, bright_object=False, threshold=120.0)
+    check(fixed, reference(gray, bright=False, threshold=120.0))
+
+
+def test_the_smallest_usable_template_encloses_4_px2():
+    # contours run through pixel centres: a 3x3 block encloses 2 x 2 = 4 px², the least accepted
+    block = np.zeros((20, 20), np.uint8)
+    block[8:11, 8:11] = 200
+    t = identify_contour_template(block, sigma=0.0, morph_kernel=0)
+    assert t.area == 4.0 and t.length == 8
 
 
 def test_to_uint8_stretches_linearly_and_rounds():
