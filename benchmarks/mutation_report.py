@@ -20,7 +20,9 @@ from pathlib import Path
 
 import pandas as pd
 
-KILLED = {1, 3, 36, 24, -24, 152, 255}  # mutmut's exit codes for killed and timeout
+# mutmut's exit codes: test failure (1, 3), timeout (36, 24, -24, 152, 255) and a crash of the test
+# process (-11, -9: the mutant took the interpreter down) all mean the tests caught the mutant
+KILLED = {1, 3, 36, 24, -24, 152, 255, -11, -9}
 SURVIVED = {0}
 NO_TESTS = {5, 33}
 
@@ -52,11 +54,19 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--survivors", metavar="MODULE", help="list the surviving mutants of this module")
     parser.add_argument("--prefix", default="", help="only mutants whose name starts with this")
+    parser.add_argument("--by-function", metavar="MODULE", help="the table per function of this module")
     args = parser.parse_args(argv)
     results = load()
     if not results:
         print("no mutation results: run `make mutate` first", file=sys.stderr)
         return 1
+    if args.by_function:
+        codes = results[args.by_function]
+        per = {}
+        for name, code in codes.items():
+            per.setdefault(name.split(".", 2)[2].rsplit("__mutmut_", 1)[0], {})[name] = code
+        print(table(per).rename(columns={"module": "function"}).to_string(index=False))
+        return 0
     if args.survivors:
         for name, code in sorted(results[args.survivors].items()):
             if code in SURVIVED | NO_TESTS and name.startswith(args.prefix):

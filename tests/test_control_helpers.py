@@ -81,7 +81,7 @@ def test_lost_and_nan_frames_are_flagged_and_a_tuple_result_is_read():
 def test_commands_outside_the_limits_are_refused_before_anything_moves():
     rig = ScriptedRig(limits=(0.0, 10.0))
     for bad in ([1.0, 10.5], [-0.1], [1.0, math.nan]):
-        with pytest.raises(ValueError, match="drive_voltages"):
+        with pytest.raises(ValueError, match=r"^drive_voltages: command"):
             drive_voltages(rig, rig, Tracker(rig), bad)
     assert rig.sent == [] and rig.grabs == 0
     df = drive_voltages(rig, rig, Tracker(rig), np.array([[0.0, 10.0]]))  # limits inclusive, any shape
@@ -99,9 +99,12 @@ def test_the_shadow_model_sees_every_command_clipped_into_its_range():
     assert model.state.y == pytest.approx(20.0)
 
 
-def test_drive_voltages_with_a_progress_bar_gives_the_same_rows():
+def test_drive_voltages_with_a_progress_bar_gives_the_same_rows(capsys):
     rig = ScriptedRig()
     plain = drive_voltages(rig, rig, Tracker(rig), [1.0, 2.0])
+    assert capsys.readouterr().err == ""  # no bar unless asked for (a script's log stays clean)
     rig2 = ScriptedRig()
-    shown = drive_voltages(rig2, rig2, Tracker(rig2), [1.0, 2.0], progress=True, desc="test")
+    shown = drive_voltages(rig2, rig2, Tracker(rig2), [1.0, 2.0], progress=True)
+    err = capsys.readouterr().err
+    assert "driving: " in err and "/2 " in err and "XX" not in err  # the bar, labelled, with its total
     pd.testing.assert_frame_equal(plain, shown)

@@ -228,8 +228,40 @@ def test_reset_is_bumpless_and_limits_are_checked():
     with pytest.raises(ValueError, match="empty"):
         pid.set_limits(1.0, -1.0)
     pid.set_limits(1.0, 1.0)  # a single point is a valid (if useless) range
-    for bad in ({"kp": math.nan}, {"kd": -0.1}, {"ki": math.inf}, {"derivative_smoothing": 1.0},
-                {"derivative_smoothing": -0.1}, {"slew_limit": 0.0}):
-        with pytest.raises(ValueError):
+    for bad, msg in (({"kp": math.nan}, r"^PID gain kp=nan must be finite and >= 0$"),
+                     ({"kd": -0.1}, r"^PID gain kd=-0\.1 must be finite and >= 0$"),
+                     ({"ki": math.inf}, r"^PID gain ki=inf must be finite and >= 0$"),
+                     ({"derivative_smoothing": 1.0}, r"^derivative_smoothing must be in \[0, 1\)$"),
+                     ({"derivative_smoothing": -0.1}, r"^derivative_smoothing must be in \[0, 1\)$"),
+                     ({"slew_limit": 0.0}, r"^slew_limit must be > 0$")):
+        with pytest.raises(ValueError, match=msg):
             PID(**bad)
     PID(derivative_smoothing=0.0)  # the documented range [0, 1) includes 0
+
+
+def test_back_calculation_keeps_the_output_equal_to_p_plus_i_plus_d():
+    # With kp, kd > 0 the limits' back-calculation must subtract both other terms: the integral is
+    # set so that P + I + D equals the output actually given (upper and lower limit, slew limit).
+    kp, ki, kd = 0.5, 0.4, 2.0
+    for limits, setpoint, meas in (((-1.0, 1.0), 5.0, (0.0, 0.5)), ((-1.0, 1.0), -5.0, (0.0, -0.5))):
+        pid = PID(kp=kp, ki=ki, kd=kd, derivative_smoothing=0.0, output_limits=limits)
+        pid.update(setpoint, meas[0])
+        out = pid.update(setpoint, meas[1])
+        p, d = kp * (setpoint - meas[1]), -kd * (meas[1] - meas[0])
+        assert out in limits and pid.integral == pytest.approx(out - p - d, abs=1e-12)
+    pid = PID(kp=kp, ki=ki, kd=kd, derivative_smoothing=0.0, slew_limit=0.25)
+    pid.update(5.0, 0.0)
+    out = pid.update(5.0, 0.5)
+    assert out == pytest.approx(0.5)  # two slew-limited steps of 0.25
+    assert pid.integral == pytest.approx(out - kp * 4.5 - (-kd * 0.5), abs=1e-12)
+
+
+def test_tracking_right_after_a_reset_concerns_the_integral_alone():
+    # no update yet: no proportional or derivative term, so the applied value is the integral
+    pid = PID(kp=0.7, ki=0.5, kd=1.0)
+    pid.reset(2.0)
+    pid.track(1.25)
+    assert pid.integral == 1.25 and pid.output == 1.25
+    pid.reset(-2.0)
+    pid.track(-1.0)
+    assert pid.integral == -1.0

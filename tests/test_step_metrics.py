@@ -163,6 +163,25 @@ def test_the_error_is_against_each_row_target_and_the_step_is_the_last_target():
     assert m["final_error_px"] == pytest.approx(np.mean(d) - 20.0)
 
 
+def test_overshoot_direction_for_small_and_zero_steps():
+    # a positive step smaller than 1 px is still a positive step; a zero step counts excursions
+    # above the target (the direction of rising displacement)
+    d = np.array([0.0, 0.3, 0.9, 0.6, 0.5, 0.5])
+    assert step_metrics(response(d, 0.5))["overshoot_px"] == pytest.approx(0.4)
+    assert step_metrics(response(np.array([0.0, 0.4, -0.7, 0.1]), 0.0))["overshoot_px"] == pytest.approx(0.4)
+
+
+def test_the_step_is_the_last_rows_target_and_two_frames_give_a_std():
+    d = np.array([0.0, 5.0, 9.8, 10.1, 10.3])
+    target = np.array([10.0, 10.0, 10.0, 10.0, 10.5])  # the target moved in the last row
+    m = step_metrics(response(d, target))
+    assert m["step_px"] == 10.5
+    assert m["final_error_px"] == pytest.approx(np.mean(d) - 10.5)
+    ok = np.array([False, False, False, True, True])
+    two = step_metrics(response(d, target, ok=ok))
+    assert two["final_std_px"] == pytest.approx(np.std([10.1, 10.3], ddof=1))
+
+
 def test_an_index_that_is_not_a_range_changes_nothing():
     d = first_order(12.0, 0.6, 30)
     resp = response(d, 12.0)
@@ -172,11 +191,11 @@ def test_an_index_that_is_not_a_range_changes_nothing():
 
 def test_bad_input_is_refused():
     resp = response(first_order(5.0, 0.5, 10), 5.0)
-    with pytest.raises(TypeError, match="DataFrame"):
+    with pytest.raises(TypeError, match=r"^response must be a DataFrame from step_response$"):
         step_metrics(resp.to_numpy())
     for col in ("frame", "t", "displacement", "target", "ok"):
         with pytest.raises(ValueError, match=f"lacks column.*{col}"):
             step_metrics(resp.drop(columns=col))
-    with pytest.raises(ValueError, match="fewer than 2 rows"):
+    with pytest.raises(ValueError, match=r"^response has fewer than 2 rows$"):
         step_metrics(resp.iloc[:1])
     step_metrics(resp.iloc[:2])  # two rows are enough
