@@ -7,6 +7,7 @@ tolerances come from the order of each approximation, said where used.
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 from scipy.special import ndtr
@@ -97,22 +98,32 @@ def test_eq_9_on_a_probe_cut_by_the_window(shift):
     assert (dx, dy) == pytest.approx(shift, abs=0.04)
 
 
+def texture(seed, shape=(40, 48)):
+    """A smooth random texture: gradients everywhere, up to the image border."""
+    rng = np.random.default_rng(seed)
+    return cv2.GaussianBlur(rng.uniform(0, 255, shape).astype(np.float32), (0, 0), 2.0) * 4.0
+
+
 def test_eq_9_is_the_least_squares_solution_over_the_inner_pixels():
     # eq. 9 = the 2x2 normal equations of min Σ (t - i - Δ·∇i)² over R (all but a 2-px border),
-    # ∇i by the 5-point mask: the same numbers as a generic least-squares solver, to rounding
-    t = wedge().astype(np.float32)
-    i = wedge(tip=(50.2, 29.9)).astype(np.float32)
+    # ∇i by the 5-point mask: the same numbers as a generic least-squares solver, to rounding.
+    # A texture has gradients up to the border, so every row and column of R counts.
+    t, i = texture(1), texture(2)
     ix, iy = five_point_gradients(i)
     rng = np.random.default_rng(5)
     mask = rng.random(t.shape) < 0.7
-    for m in (None, mask):
+    for m in (None, mask, mask.astype(np.uint8)):
         use = np.zeros(t.shape, bool)
         use[2:-2, 2:-2] = True
         if m is not None:
-            use &= m
+            use &= m.astype(bool)
         a = np.stack([ix[use], iy[use]], 1).astype(np.float64)
         want = np.linalg.lstsq(a, (t - i)[use].astype(np.float64), rcond=None)[0]
         assert gradient_subpixel_shift(t, i, mask=m) == pytest.approx(tuple(want), rel=1e-9, abs=1e-12)
+    # 8-bit frames are differenced as numbers (no wrap-around of t - i)
+    t8, i8 = np.clip(t / 4, 0, 255).astype(np.uint8), np.clip(i / 4, 0, 255).astype(np.uint8)
+    assert gradient_subpixel_shift(t8, i8) == pytest.approx(
+        gradient_subpixel_shift(t8.astype(np.float32), i8.astype(np.float32)), rel=1e-9)
 
 
 def test_eq_9_uses_the_mask_and_ignores_the_two_pixel_border():
@@ -213,6 +224,21 @@ def test_estimate_noise_on_white_noise_of_constant_variance():
     assert m.variance_floor == pytest.approx(0.25 * 25.0, rel=0.2)
 
 
+def test_estimate_noise_cancels_line_offsets_and_follows_the_level_down_the_image():
+    # Per-line offsets (sd 10 gray levels) cancel in each row pair's median-subtracted difference;
+    # the variance a + b I is regressed on the local level, here rising down the image (60 on
+    # the top half, 180 on the bottom), variance 4 + 2 I: 124 and 364.
+    rng = np.random.default_rng(8)
+    level = np.where(np.arange(256)[:, None] < 128, 60.0, 180.0).repeat(256, 1)
+    img = level + rng.standard_normal(level.shape) * np.sqrt(4.0 + 2.0 * level)
+    img += rng.normal(0, 10.0, (256, 1))
+    m = estimate_noise(img)
+    assert m.rho < 0.05
+    # ±15 %: the level bins mix the two halves near the step (blurred by the 2-px smoothing)
+    assert m.variance(60.0) == pytest.approx(124.0, rel=0.15)
+    assert m.variance(180.0) == pytest.approx(364.0, rel=0.15)
+
+
 def test_estimate_noise_degenerate_images():
     # noise-free (synthetic) image: row differences are scene, not noise -> the quantisation floor
     clean = disc((64, 64))
@@ -234,6 +260,8 @@ def test_whiten_lines_is_the_ar1_inverse_filter():
     np.testing.assert_allclose(w[:, 0], (1 - rho) * img[:, 0], rtol=1e-6)
     const = whiten_lines(np.full((3, 5), 10.0), rho)
     np.testing.assert_allclose(const, 6.0, rtol=1e-6)  # a constant stays a constant
+    u8 = np.arange(45, dtype=np.uint8).reshape(5, 9)  # 8-bit frames are whitened as numbers
+    np.testing.assert_allclose(whiten_lines(u8, rho), whiten_lines(u8.astype(np.float32), rho))
     same = whiten_lines(img, 0.0)
     np.testing.assert_array_equal(same, img)
     assert same is not img  # a copy: the caller's frame is never modified
@@ -249,6 +277,9 @@ def test_weighted_ncc():
     b = np.array([2.0, 1.0, 7.0, -100.0, 50.0])
     # zero weights drop samples: the weighted NCC is the plain one on the rest
     assert weighted_ncc(a, b, w) == pytest.approx(np.corrcoef(a[:3], b[:3])[0, 1])
+    # normalised weights (sum 1) and small signals (variance << 1) are as good as any
+    assert weighted_ncc(a, b, w / 3) == pytest.approx(weighted_ncc(a, b, w))
+    assert weighted_ncc(0.01 * a, 0.01 * b) == pytest.approx(weighted_ncc(a, b))
     w2 = np.array([1.0, 2.0, 1.0, 3.0, 1.0])  # integer weights = repeated samples
     rep = np.repeat(np.arange(5), w2.astype(int))
     assert weighted_ncc(a, b, w2) == pytest.approx(np.corrcoef(a[rep], b[rep])[0, 1])
