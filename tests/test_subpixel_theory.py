@@ -419,3 +419,60 @@ def test_gauss_newton_with_the_band_partly_off_the_image():
     fit = gauss_newton_translation(crop, pts - (crop_x0, 0), values, gx, gy, (0.0, 0.0))
     assert ref.converged and tuple(ref.shift) == pytest.approx((1.2, -0.4), abs=0.01)
     assert np.hypot(*(fit.shift - ref.shift)) < 0.05
+
+
+def test_gauss_newton_sectors_absorb_a_local_background_level():
+    # A local level (+25 gray levels) on the right half of the band, which the template does not
+    # have: without sectors it pulls the fit; with that half as a sector of its own, its mean
+    # residual is removed at each iteration and the shift is the noise-free one again.
+    _, pts, values, gx, gy, _ = _template()
+    image = disc(centre=(32.3, 31.8))
+    right = pts[:, 0] > 36
+    image[:, 37:] += 25.0
+    image = image.astype(np.float32)
+    kw = {"photometric": False, "huber": None}
+    biased = gauss_newton_translation(image, pts, values, gx, gy, (0, 0), **kw)
+    sectors = np.where(right, 0, -1)
+    fit = gauss_newton_translation(image, pts, values, gx, gy, (0, 0), sectors=sectors, **kw)
+    assert np.hypot(*(biased.shift - (0.3, -0.2))) > 0.1
+    assert tuple(fit.shift) == pytest.approx((0.3, -0.2), abs=0.02)
+
+
+def test_gauss_newton_curvature_allows_a_smoothed_template_gradient():
+    # A smoothed template gradient is smaller than the true one at a sharp edge, so plain
+    # Gauss-Newton over-steps; with the image's own gradients in the normal matrix (curvature=) it
+    # is the Newton step of the same estimating equation and converges to the same shift.
+    template, pts, values, _, _, _ = _template(sigma=1.0)
+    sgx, sgy = (cv2.GaussianBlur(g, (0, 0), 1.0) for g in five_point_gradients(template))
+    ys, xs = pts[:, 1].astype(int), pts[:, 0].astype(int)
+    image = disc(centre=(32.35, 31.75), sigma=1.0).astype(np.float32)
+    curv = five_point_gradients(image)
+    fit = gauss_newton_translation(image, pts, values, sgx[ys, xs], sgy[ys, xs], (0, 0), curvature=curv,
+                                   photometric=False)
+    assert fit.converged and tuple(fit.shift) == pytest.approx((0.35, -0.25), abs=0.02)
+    # one step: the Newton step is exact to second order, the plain step with the smaller smoothed
+    # gradients is off to first order (by the ratio of Σ ∇T̃ ∇I to Σ ∇T̃ ∇T̃)
+    args = (image, pts, values, sgx[ys, xs], sgy[ys, xs], (0, 0))
+    one_newton = gauss_newton_translation(*args, curvature=curv, photometric=False, max_iterations=1)
+    one_plain = gauss_newton_translation(*args, photometric=False, max_iterations=1)
+    assert np.hypot(*(one_newton.shift - fit.shift)) < 0.5 * np.hypot(*(one_plain.shift - fit.shift))
+
+
+def test_gauss_newton_gain_of_a_noisy_template_is_unbiased_with_the_correction():
+    # Errors in variables: regressing the image on a template with noise variance v shrinks the
+    # gain by var(T) / (var(T) + v). Both the variance correction and a denoised instrument remove
+    # that bias (the instrument's own smoothing error aside).
+    template, pts, values, gx, gy, _ = _template()
+    rng = np.random.default_rng(11)
+    v = 30.0 ** 2
+    noisy = values + rng.normal(0, 30.0, values.size)
+    image = (1.5 * template + 10.0).astype(np.float32)  # the image itself noise-free
+    kw = {"huber": None}
+    plain = gauss_newton_translation(image, pts, noisy, gx, gy, (0, 0), **kw)
+    attenuation = np.var(values) / (np.var(values) + v)
+    assert plain.gain == pytest.approx(1.5 * attenuation, rel=0.1)
+    corrected = gauss_newton_translation(image, pts, noisy, gx, gy, (0, 0), template_variance=np.full(values.size, v),
+                                         **kw)
+    assert corrected.gain == pytest.approx(1.5, rel=0.05)
+    instrumented = gauss_newton_translation(image, pts, noisy, gx, gy, (0, 0), instrument=values, **kw)
+    assert instrumented.gain == pytest.approx(1.5, rel=0.05)
