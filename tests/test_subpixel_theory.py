@@ -178,12 +178,14 @@ def test_the_samplers_replicate_the_border(shift):
     np.testing.assert_allclose(sample_bicubic(img, pts[:, 0] + shift[0], pts[:, 1] + shift[1]), want, atol=2e-3)
 
 
-@pytest.mark.parametrize("shift", [(-0.4, -0.7), (-1.5, 1.25)])
+@pytest.mark.parametrize("shift", [(-0.4, -0.7), (-1.5, 1.25), (1.5, 0.25), (0.25, 1.5), (-0.5, 0.0)])
 def test_points_shifted_off_the_image_see_the_border_replicated(shift):
+    # off the left/top, off the right only, off the bottom only
     rng = np.random.default_rng(1)
     img = rng.uniform(0, 255, (12, 14)).astype(np.float32)
     want = [keys_reference(img, x + shift[0], y + shift[1]) for x, y in BORDER_POINTS]
     np.testing.assert_allclose(sample_shifted(img, BORDER_POINTS, shift), want, atol=2e-3)
+    np.testing.assert_allclose(sample_shifted_filtered(img, BORDER_POINTS, shift), want, atol=2e-3)
     np.testing.assert_allclose(sample_bicubic(img, BORDER_POINTS[:, 0] + shift[0], BORDER_POINTS[:, 1] + shift[1]),
                                want, atol=2e-3)
 
@@ -419,6 +421,23 @@ def test_gauss_newton_with_the_band_partly_off_the_image():
     fit = gauss_newton_translation(crop, pts - (crop_x0, 0), values, gx, gy, (0.0, 0.0))
     assert ref.converged and tuple(ref.shift) == pytest.approx((1.2, -0.4), abs=0.01)
     assert np.hypot(*(fit.shift - ref.shift)) < 0.05
+
+
+def test_gauss_newton_setup_refuses_regions_without_two_levels():
+    from semlab.subpixel import gauss_newton_setup
+
+    _, _, values, gx, gy, inside = _template()
+    for bad in (np.ones_like(inside), np.zeros_like(inside)):
+        with pytest.raises(ValueError, match=r"^regions must mark both object and background pixels$"):
+            gauss_newton_setup(values, gx, gy, regions=bad)
+    one = np.zeros_like(inside)
+    one[0] = True  # a single object pixel is enough to define a level
+    gauss_newton_setup(values, gx, gy, regions=one)
+    with pytest.raises(ValueError, match=r"^the template has no contrast between object and background$"):
+        # (a constant 0: exactly equal means; the check compares the two means with ==, so a
+        # constant such as 7.0 can escape it by rounding -- noted, not this file's business)
+        gauss_newton_setup(np.zeros_like(values), gx, gy, regions=inside)
+    gauss_newton_setup(values, gx, gy, regions=np.ones_like(inside), photometric=False)  # not used then
 
 
 def test_gauss_newton_sectors_absorb_a_local_background_level():
