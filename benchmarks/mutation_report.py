@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import time
 import tomllib
 from collections import Counter
 from pathlib import Path
@@ -33,8 +34,13 @@ def load(root: Path = Path(".")) -> dict[str, dict[str, int | None]]:
     for module in config["only_mutate"]:
         for path in sorted(root.glob(module)):
             meta = root / "mutants" / f"{path.relative_to(root)}.meta"
-            if meta.exists():
-                out[str(path.relative_to(root))] = json.loads(meta.read_text())["exit_code_by_key"]
+            if meta.exists():  # (mutmut rewrites it while running: read it again if it was half written)
+                for attempt in range(5):
+                    try:
+                        out[str(path.relative_to(root))] = json.loads(meta.read_text())["exit_code_by_key"]
+                        break
+                    except json.JSONDecodeError:
+                        time.sleep(0.2 * (attempt + 1))
     return out
 
 
