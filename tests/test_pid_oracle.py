@@ -248,7 +248,9 @@ def test_back_calculation_keeps_the_output_equal_to_p_plus_i_plus_d():
         pid.update(setpoint, meas[0])
         out = pid.update(setpoint, meas[1])
         p, d = kp * (setpoint - meas[1]), -kd * (meas[1] - meas[0])
-        assert out in limits and pid.integral == pytest.approx(out - p - d, abs=1e-12)
+        # the error keeps its sign: the output sits on that side's limit, and P + I + D equals it
+        assert out == (limits[1] if setpoint > 0 else limits[0])
+        assert pid.integral == pytest.approx(out - p - d, abs=1e-12)
     pid = PID(kp=kp, ki=ki, kd=kd, derivative_smoothing=0.0, slew_limit=0.25)
     pid.update(5.0, 0.0)
     out = pid.update(5.0, 0.5)
