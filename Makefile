@@ -12,7 +12,7 @@ ARGS   ?=
 ROOT_FLAG := $(shell [ "$$(id -u)" = 0 ] && echo --allow-root)
 PYTEST_ARGS ?=
 
-.PHONY: setup lab test test-fast bench chromium strip lint clean
+.PHONY: setup lab test test-fast bench chromium strip lint clean mutate
 
 setup: $(STAMP)
 
@@ -51,6 +51,13 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_tracking_seeds.py
 	$(BIN)/python benchmarks/bench_servo.py
 	nice -n 10 $(BIN)/python benchmarks/bench_corpus.py
+
+# Mutation testing of the core modules ([tool.mutmut] in pyproject.toml; slow, not in CI: the fixed
+# sample in tests/test_mutants.py is). Niced, 2 workers; `make mutate ARGS='semlab.control.*'` runs a subset.
+# The table per module: $(BIN)/python benchmarks/mutation_report.py (reads mutants/).
+mutate: $(STAMP)
+	nice -n 10 $(BIN)/mutmut run --max-children 2 $(ARGS)
+	$(BIN)/python benchmarks/mutation_report.py
 
 strip: $(STAMP)
 	$(BIN)/nbstripout --keep-id notebooks/*.ipynb

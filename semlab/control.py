@@ -124,14 +124,17 @@ class PID:
         self._p = self.kp * e
         lo, hi = self.output_limits
         integral = self.integral + self.ki * e
-        # anti-windup (1): the integral never drives the output past its limits (back-calculation)
-        integral = min(max(integral, lo - self._p - self._d), hi - self._p - self._d)
+        # anti-windup (1): the integral never drives the output past its limits (back-calculation);
+        # without an integrator (ki = 0) there is nothing to wind up and the integral keeps its value
+        if self.ki > 0:
+            integral = min(max(integral, lo - self._p - self._d), hi - self._p - self._d)
         raw = self._p + integral + self._d
         out = min(max(raw, lo), hi)
         slewed = min(max(out, self.output - self.slew_limit), self.output + self.slew_limit)
-        # anti-windup (2): while the slew limit holds the output back, do not integrate further
-        if slewed != out and (slewed - out) * e < 0:
-            integral = self.integral
+        # anti-windup (2): while the slew limit holds the output back, the integral is back-calculated
+        # to the output given (it grows no faster than the output may), so P + I + D stays the output
+        if slewed != out and self.ki > 0:
+            integral = slewed - self._p - self._d
         self.integral = integral
         self.output = slewed
         return slewed
@@ -140,7 +143,9 @@ class PID:
         """Tell the controller the output actually used after limits further downstream (axis limits,
         voltage slew): the integral is back-calculated so that it does not wind up against them."""
         applied = float(applied)
-        if applied < self.output:
+        if self.ki == 0:  # no integrator: nothing to wind up
+            pass
+        elif applied < self.output:
             self.integral = min(self.integral, applied - self._p - self._d)
         elif applied > self.output:
             self.integral = max(self.integral, applied - self._p - self._d)

@@ -173,8 +173,9 @@ def sample_shifted_filtered(image, points, shift) -> np.ndarray:
     px = points[:, 0].astype(np.intp) + int(fx)
     py = points[:, 1].astype(np.intp) + int(fy)
     if px.min() < 0 or py.min() < 0 or px.max() >= cols or py.max() >= rows:
-        px = np.clip(px, 0, cols - 1)
-        py = np.clip(py, 0, rows - 1)
+        # a point shifted off the image: clipping its index would read the interpolation at the
+        # border pixel + fraction, not the replicated border at the point's own position
+        return sample_bicubic(img, points[:, 0] + shift[0], points[:, 1] + shift[1])
     return filtered[py, px].astype(np.float64)
 
 
