@@ -337,6 +337,9 @@ class GaussNewtonResult:
         Template pixels in the fit.
     weight_total : float
         ``Σ weights``: the robust weights' total (``n_pixels`` when every pixel is an inlier).
+    robust_ssr : float
+        ``Σ prior·weights²·residual²``: the squared influence ``ψ(r)²`` of the residuals, which an
+        outlier bounds (Huber's M-estimator variance; ``weighted_ssr`` grows with its residual).
     """
 
     shift: np.ndarray
@@ -351,6 +354,7 @@ class GaussNewtonResult:
     weighted_ssr: float = float("nan")
     n_pixels: int = 0
     weight_total: float = float("nan")
+    robust_ssr: float = float("nan")
 
 
 def _remap_points(image, xs, ys):
@@ -752,7 +756,8 @@ class _GaussNewton:
             iterations=it, converged=converged,
             samples=samples if samples is not None else np.full_like(self.t, np.nan),
             normal_matrix=hess, n_pixels=int(robust.size), weight_total=float(robust.sum()),
-            weighted_ssr=float(total @ (residual * residual)) if residual is not None else float("nan"))
+            weighted_ssr=float(total @ (residual * residual)) if residual is not None else float("nan"),
+            robust_ssr=float((total * robust) @ (residual * residual)) if residual is not None else float("nan"))
 
 
 def weighted_ncc(a, b, weights=None) -> float:

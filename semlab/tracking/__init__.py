@@ -2,7 +2,7 @@
 
 Methods
 -------
-``"ic"`` (the default of :class:`Tracker`)
+``"ic"`` (the default of :class:`Tracker`, :func:`track`, the CLI and the widgets)
     Beyond the paper, and measured best (``benchmarks/bench_tracking.py``): inverse-compositional
     Gauss–Newton (eq. 2 with the paper's offline matrix ``M₀`` of eqs. 4-5 as its Jacobian) on the
     contour band — the pixels within ``band_px`` of the contour template, where nearly all the
@@ -19,7 +19,7 @@ Methods
     sample, a brightness jump), a masked normalised correlation of the object's neighbourhood
     over the whole search window — blind to gain and offset — re-acquires it if its peak stands
     out, and Gauss–Newton restarts from there.
-``"contour"`` (the default of :func:`track`, as the contract fixes it), ``"ssd"``, ``"hb"``
+``"contour"`` (the paper's method), ``"ssd"``, ``"hb"``
     The paper's method (adaptive-threshold Canny, eq. 10, the contour-template match, one step of
     eq. 9 on the contour band), the conventional full-template SSD at integer positions (eq. 2)
     that it improves on, and its parametric SSD tracker (eqs. 2-5, Hager & Belhumeur 1998): see

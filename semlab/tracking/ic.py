@@ -20,6 +20,7 @@ from .band import MIN_BAND_PIXELS, build_band_model, registration_band
 from .method import Method, Motion, Setup, Verdict
 from .registration import FitResult, Start, register
 from .search import coarse_mask, coarse_search, coarse_template, reacquire
+from .uncertainty import Uncertainty, model_error, position_sigma
 
 __all__ = ["ICMethod"]
 
@@ -49,12 +50,16 @@ class ICMethod(Method):
     the first frames' scores."""
 
     name = "ic"
+    flags_uncertain = True
 
     def start(self, setup: Setup) -> None:
         super().start(setup)
         self.noise, self.widths, self.to_8bit = setup.noise, setup.widths, setup.to_8bit
         self.rho = setup.noise.rho if self.options.photometry.whiten else 0.0
         self.n_averaged = 1
+        #: Covariance (px²) of the origin, frame 0's shift against the current template (0 while
+        #: frame 0 is the template).
+        self.origin_cov = np.zeros((2, 2))
         self.consistency = None
         self.gain, self.offset = 1.0, 0.0
         self.scores: list[float] = []
@@ -147,9 +152,9 @@ class ICMethod(Method):
         if (fit is not None and fit.converged and fit.score >= self.threshold()
                 and np.hypot(*(fit.shift - found.shift)) <= REFINED_WITHIN_PX):
             self.gain, self.offset = fit.gain, fit.offset
-            return Verdict.accept(fit.shift, fit.score, reacquired=True)
+            return Verdict.accept(fit.shift, fit.score, reacquired=True, found=fit)
         self.gain, self.offset = found.gain, found.offset
-        return Verdict.accept(found.shift, found.score, reacquired=True)
+        return Verdict.accept(found.shift, found.score, reacquired=True, found=found)
 
     def verdict(self, arr, fit, predicted) -> Verdict:
         if not fit.converged:
@@ -164,12 +169,24 @@ class ICMethod(Method):
             self.scores.append(fit.score)
         return Verdict.accept(fit.shift, fit.score, found=fit)
 
+    def sigma(self, verdict: Verdict) -> Uncertainty | None:
+        """The frame's fit (or the re-acquired match's) and the origin's, and the model error once
+        the object has moved (:mod:`semlab.tracking.uncertainty`)."""
+        found = verdict.found
+        if found is None:
+            return Uncertainty((np.inf, np.inf), (np.inf, np.inf))
+        cov = found.covariance() if isinstance(found, FitResult) else found.covariance
+        cov = np.full((2, 2), np.inf) if cov is None else cov
+        moved = float(np.hypot(*(np.asarray(verdict.shift, float) - self.origin)))
+        return Uncertainty(position_sigma(cov, self.origin_cov, model_sd=model_error(moved)),
+                           position_sigma(cov, self.origin_cov))
+
     def after_accept(self, arr, verdict: Verdict) -> np.ndarray | None:
         """The frame enters the template average when it registered well. The answer is the shift
         against the template that measured it, with that template's origin; a template refreshed
         from this frame brings its own origin, and the motion moves into its coordinates."""
         fit = verdict.found
-        if self.averager is None or fit is None or not (
+        if self.averager is None or not isinstance(fit, FitResult) or not (
                 fit.inliers > AVERAGE_MIN_INLIERS
                 and fit.score >= AVERAGE_MIN_SCORE_FRACTION * np.median(self.scores)):
             return None
@@ -202,6 +219,7 @@ class ICMethod(Method):
         if ref.converged:
             first.shift, first.gain, first.offset = ref.shift.copy(), ref.gain, ref.offset
             self.origin = ref.shift.copy()
+            self.origin_cov = ref.covariance()
 
     def _rebuild(self) -> None:
         """Every stored frame registered against the averaged template and averaged anew (twice with
@@ -219,7 +237,9 @@ class ICMethod(Method):
                                 if cut is not None else None)
             self._build()
         # The origin: where frame 0 (the first stored frame) sits against the new template.
-        self.origin = np.asarray(self.averager.frames[0].shift, float).copy()
+        first = self.averager.frames[0]
+        self.origin = np.asarray(first.shift, float).copy()
+        self.origin_cov = self._register_stored(first).covariance()
 
     def _reidentify(self) -> None:
         """The contour template and the band identified again, on the averaged template.

@@ -119,6 +119,9 @@ class Method:
     """
 
     name = ""
+    #: Whether an answer whose :meth:`sigma` is too large is flagged (``"ic"``; the paper's methods
+    #: keep their own verdicts, exactly as the paper has them, and only report the uncertainty).
+    flags_uncertain = False
 
     def __init__(self, options: TrackerOptions):
         self.options = options
@@ -156,6 +159,11 @@ class Method:
     def verdict(self, arr, found, predicted) -> Verdict:
         """Accept ``found`` or say why the frame is lost."""
         raise NotImplementedError
+
+    def sigma(self, verdict: Verdict):
+        """The accepted position's :class:`~semlab.tracking.uncertainty.Uncertainty`, or None when
+        the method cannot tell."""
+        return None
 
     def after_accept(self, arr, verdict: Verdict) -> np.ndarray | None:
         """Work on an accepted frame (``"ic"``: the template averaging); returns the change of

@@ -31,12 +31,13 @@ from ..matching import (
     offline_matrix,
     ssd_match,
 )
-from ..subpixel import gradient_subpixel_shift, sample_shifted_filtered, weighted_ncc
+from ..subpixel import five_point_gradients, gradient_subpixel_shift, sample_shifted_filtered, weighted_ncc
 from ..template import to_uint8
 from .band import contour_core, inner_mask
 from .frames import crop
 from .method import Method, Setup, Verdict
 from .search import search_window
+from .uncertainty import INTEGER_VARIANCE_PX2, Uncertainty, least_squares_covariance, position_sigma
 
 __all__ = ["ContourMethod", "HBMethod", "IntegerMatch", "SSDMethod"]
 
@@ -61,6 +62,10 @@ class IntegerMatch:
     score: float
 
 
+#: Eq. 9 sums over the template less this border (the 5-point mask's reach).
+EQ9_BORDER_PX = 2
+
+
 class _IntegerMethod(Method):
     """An integer match, optionally refined by one step of the paper's eq. 9."""
 
@@ -72,14 +77,35 @@ class _IntegerMethod(Method):
             return Verdict.lose(f"no match (score {match.score:.2f} < {min_score:.2f})")
         x0, y0, w, h = self.roi
         dx = dy = 0.0
+        patch = crop(arr, match.left, match.top, match.left + w, match.top + h)
         if self.options.contour.subpixel:
-            patch = crop(arr, match.left, match.top, match.left + w, match.top + h)
             dx, dy = gradient_subpixel_shift(self.template, patch, mask=self.refine_mask)
             if not (np.isfinite(dx) and np.isfinite(dy)):
                 dx = dy = 0.0
             dx, dy = (float(np.clip(dx, -MAX_EQ9_STEP_PX, MAX_EQ9_STEP_PX)),
                       float(np.clip(dy, -MAX_EQ9_STEP_PX, MAX_EQ9_STEP_PX)))
-        return Verdict.accept((match.left - x0 + dx, match.top - y0 + dy), match.score)
+        return Verdict.accept((match.left - x0 + dx, match.top - y0 + dy), match.score,
+                              found=self._step_covariance(patch, dx, dy))
+
+    def _step_covariance(self, patch, dx: float, dy: float) -> np.ndarray:
+        """The eq. 9 step's covariance from its own least squares (plus the rounding of an integer
+        match that no step refined)."""
+        gx, gy = five_point_gradients(patch)
+        use = inner_mask(patch.shape, EQ9_BORDER_PX)
+        if self.refine_mask is not None:
+            use &= np.asarray(self.refine_mask, bool)
+        jac = np.stack([gx[use], gy[use]], axis=1).astype(np.float64)
+        residual = (self.template - patch)[use].astype(np.float64) - jac @ np.array([dx, dy])
+        cov = least_squares_covariance(jac, residual)
+        if not self.options.contour.subpixel:
+            cov = cov + INTEGER_VARIANCE_PX2 * np.eye(2)
+        return cov
+
+    def sigma(self, verdict: Verdict) -> Uncertainty | None:
+        if verdict.found is None:
+            return None
+        sigma = position_sigma(verdict.found)
+        return Uncertainty(sigma, sigma)
 
 
 class ContourMethod(_IntegerMethod):
@@ -141,6 +167,7 @@ class HBFit:
     shift: np.ndarray
     score: float
     converged: bool
+    covariance: np.ndarray | None = None
 
 
 class HBMethod(Method):
@@ -179,7 +206,8 @@ class HBMethod(Method):
                 break
             if np.max(np.abs(p - start)) > HB_MAX_MOVE_PX:
                 break
-        return HBFit(p, weighted_ncc(warped, self.values), converged)
+        residual = warped - self.values
+        return HBFit(p, weighted_ncc(warped, self.values), converged, least_squares_covariance(self.m0, residual))
 
     def verdict(self, arr, fit: HBFit, predicted) -> Verdict:
         if not fit.converged:
@@ -187,4 +215,10 @@ class HBMethod(Method):
         min_score = self.options.loss.min_score
         if fit.score < min_score:
             return Verdict.lose(f"no match (score {fit.score:.2f} < {min_score:.2f})")
-        return Verdict.accept(fit.shift, fit.score)
+        return Verdict.accept(fit.shift, fit.score, found=fit.covariance)
+
+    def sigma(self, verdict: Verdict) -> Uncertainty | None:
+        if verdict.found is None:
+            return None
+        sigma = position_sigma(verdict.found)
+        return Uncertainty(sigma, sigma)

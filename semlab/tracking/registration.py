@@ -50,6 +50,9 @@ MIN_LEVEL_GAIN = 0.05
 MATURE_JACOBIAN_SIGMA = 1.0
 #: Levels of the ladder a mature template uses from a prediction (the widest ones).
 MATURE_LEVELS = 2
+#: Parameters a fit estimates besides those of its normal matrix: the two region levels (gain
+#: and offset) when they follow the object and background means instead.
+FIT_NUISANCE_PARAMETERS = 2
 
 
 @dataclass(frozen=True)
@@ -89,6 +92,8 @@ class FitResult:
         Band pixels in the last stage.
     weight_total : float
         Their robust weights' total.
+    robust_ssr : float
+        The residuals' squared influence (:class:`semlab.subpixel.GaussNewtonResult`).
     """
 
     shift: np.ndarray
@@ -102,13 +107,39 @@ class FitResult:
     weighted_ssr: float
     n_pixels: int
     weight_total: float
+    robust_ssr: float = float("nan")
+
+    def covariance(self) -> np.ndarray:
+        """The shift's covariance (px², 2×2) from this fit alone: ``s² N⁻¹``.
+
+        ``N`` is the last stage's normal matrix (the shift's Fisher information up to the noise
+        scale, the robust weights included, gain and offset eliminated when they were fitted
+        jointly) and ``s²`` the residuals' variance as Huber's M-estimator has it,
+        ``Σ prior·w²·r² / (Σ w − p)``, measured on the frame: residuals that the model does not
+        explain (charging, the template's own noise) inflate it, an outlier (clutter, an occluder)
+        only by its bounded influence, and pixels the robust weights dropped carry no information.
+        Infinite when the fit left nothing to judge it by.
+        """
+        inf = np.full((2, 2), np.inf)
+        matrix = self.normal_matrix
+        dof = self.weight_total - (0 if matrix is None else len(matrix)) - FIT_NUISANCE_PARAMETERS
+        if matrix is None or not dof > 0 or not np.isfinite(self.robust_ssr):
+            return inf
+        symmetric = 0.5 * (matrix + matrix.T)
+        try:
+            inverse = np.linalg.inv(symmetric)[:2, :2]
+        except np.linalg.LinAlgError:
+            return inf
+        if not (np.all(np.isfinite(inverse)) and inverse[0, 0] > 0 and inverse[1, 1] > 0):
+            return inf
+        return (self.robust_ssr / dof) * inverse
 
     @classmethod
     def of(cls, fit: GaussNewtonResult, score: float, converged: bool | None = None) -> FitResult:
         return cls(shift=fit.shift, gain=fit.gain, offset=fit.offset, score=score,
                    converged=fit.converged if converged is None else converged, inliers=fit.inliers,
                    iterations=fit.iterations, normal_matrix=fit.normal_matrix, weighted_ssr=fit.weighted_ssr,
-                   n_pixels=fit.n_pixels, weight_total=fit.weight_total)
+                   n_pixels=fit.n_pixels, weight_total=fit.weight_total, robust_ssr=fit.robust_ssr)
 
 
 @dataclass(frozen=True)

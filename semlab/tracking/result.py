@@ -22,6 +22,10 @@ class TrackResult:
         False when the target is lost or the frame is unusable.
     reason : str
         Why ``ok`` is False ('' otherwise).
+    sigma_x, sigma_y : float
+        The position's standard uncertainty (px, 1 σ) along x and y: what the frame's fit, the
+        origin's and the measured model error allow (see :mod:`semlab.tracking.uncertainty`);
+        NaN when ``ok`` is False.
     """
 
     x: float
@@ -29,3 +33,5 @@ class TrackResult:
     score: float
     ok: bool
     reason: str = ""
+    sigma_x: float = float("nan")
+    sigma_y: float = float("nan")

@@ -9,6 +9,7 @@ import pandas as pd
 from ..protocols import VisualTracker
 from .frames import is_roi_list, iter_frames
 from .result import TrackResult
+from .options import DEFAULT_METHOD
 from .tracker import Tracker
 
 __all__ = ["follow_frames", "start_trackers", "track"]
@@ -30,7 +31,7 @@ def follow_frames(trackers: list[VisualTracker], frames: Iterable, first_index: 
             yield i, k, t.update(frame)
 
 
-def track(frames, roi, *, method: str = "contour", progress: bool | None = None, **params) -> pd.DataFrame:
+def track(frames, roi, *, method: str = DEFAULT_METHOD, progress: bool | None = None, **params) -> pd.DataFrame:
     """Track the ROI's centre point through a sequence of frames.
 
     Parameters
@@ -41,9 +42,11 @@ def track(frames, roi, *, method: str = "contour", progress: bool | None = None,
         ROI in frame 0 (top-left pixel and size). A list tracks several targets (e.g. the four
         probes) in one pass over the frames, one :class:`Tracker` each, and adds a ``target``
         column (the index in the list).
-    method : {"contour", "ic", "ssd", "hb"}
-        ``"contour"`` (default) is the paper's method, ``"ssd"`` the conventional baseline and
-        ``"ic"`` semlab's best (the default of :class:`Tracker`); see :mod:`semlab.tracking`.
+    method : {"ic", "contour", "ssd", "hb"}
+        ``"ic"`` (the default, as for :class:`Tracker`, the CLI and the widgets) is semlab's method,
+        the best measured (``benchmarks/bench_corpus.py``); ``"contour"`` is the paper's method,
+        ``"ssd"`` the conventional baseline it improves on, ``"hb"`` its parametric SSD tracker; see
+        :mod:`semlab.tracking`.
     progress : bool or None
         tqdm progress bar; ``None`` shows it for sequences longer than 50 frames.
     **params
@@ -52,8 +55,10 @@ def track(frames, roi, *, method: str = "contour", progress: bool | None = None,
     Returns
     -------
     pandas.DataFrame
-        One row per frame (and target): ``frame, x, y, score, ok``. ``x, y`` is where the ROI's
-        centre point has moved to, px; NaN with ``ok=False`` where the target was lost.
+        One row per frame (and target): ``frame, x, y, score, ok, sigma_x, sigma_y``. ``x, y`` is
+        where the ROI's centre point has moved to, px; ``sigma_x, sigma_y`` its standard
+        uncertainty (px, 1 σ; :mod:`semlab.tracking.uncertainty`). NaN with ``ok=False`` where the
+        target was lost or the answer too uncertain to trust.
 
     Raises
     ------
@@ -67,7 +72,7 @@ def track(frames, roi, *, method: str = "contour", progress: bool | None = None,
     >>> yy, xx = np.mgrid[:240, :320]
     >>> frames = [np.where((xx - 150 - k) ** 2 + (yy - 120) ** 2 < 30 ** 2, 200, 60).astype(np.uint8)
     ...           for k in range(3)]
-    >>> df = track(frames, (100, 70, 100, 100), method="ic")
+    >>> df = track(frames, (100, 70, 100, 100))
     >>> df["x"].round(1).tolist(), bool(df["ok"].all())
     ([149.5, 150.5, 151.5], True)
     """
@@ -85,8 +90,8 @@ def track(frames, roi, *, method: str = "contour", progress: bool | None = None,
 
         iterator = tqdm(iterator, total=None if n is None else n - 1, desc=f"tracking ({method})")
     rows += follow_frames(trackers, iterator)
-    df = pd.DataFrame([(i, k, r.x, r.y, r.score, r.ok) for i, k, r in rows],
-                      columns=["frame", "target", "x", "y", "score", "ok"])
+    df = pd.DataFrame([(i, k, r.x, r.y, r.score, r.ok, r.sigma_x, r.sigma_y) for i, k, r in rows],
+                      columns=["frame", "target", "x", "y", "score", "ok", "sigma_x", "sigma_y"])
     df["ok"] = df["ok"].astype(bool)
     if rois is None:
         return df.drop(columns="target")

@@ -15,8 +15,10 @@ import numpy as np
 
 from ..matching import parabola_peak
 from ..roi import clip_window, roi_centre
+from ..subpixel import five_point_gradients
 from .band import inner_mask
 from .frames import crop
+from .uncertainty import least_squares_covariance
 
 __all__ = ["Candidate", "coarse_mask", "coarse_search", "coarse_template", "reacquire", "search_window"]
 
@@ -38,6 +40,11 @@ REACQUIRE_MIN_MARGIN = 0.05
 RIVAL_DISTANCE_PX = 8
 #: Half-width (px) of the full-resolution refinement around the half-resolution peak.
 REACQUIRE_REFINE_PX = 3
+#: Smoothing (px) of the template before the gradients of a re-acquired match's covariance.
+MATCH_GRADIENT_SIGMA = 1.0
+#: Variance (px²) of a correlation peak's parabola fit about the true sub-pixel peak: a parabola
+#: through three samples of a peak a few px wide is off by up to about 0.1 px ("pixel locking").
+PARABOLA_VARIANCE_PX2 = 0.1 ** 2
 
 
 @dataclass(frozen=True)
@@ -49,6 +56,7 @@ class Candidate:
     gain: float
     offset: float
     score: float
+    covariance: np.ndarray | None = None
 
 
 def search_window(roi, search_size: int, shift, shape, *, whole: bool = False) -> tuple[int, int, int, int]:
@@ -190,4 +198,20 @@ def reacquire(arr, window, template, region, roi, rho: float) -> Candidate | Non
     b = tmpl[mask].astype(np.float64)
     gain = float(np.cov(a, b)[0, 1] / np.var(b, ddof=1))
     offset = (1.0 - rho) * float(a.mean() - gain * b.mean())
-    return Candidate(shift, gain, offset, float(peak))
+    cov = _match_covariance(crop(arr, wx + fx0 + ix, wy + fy0 + iy, wx + fx0 + ix + w, wy + fy0 + iy + h), template, mask,
+                            gain)
+    return Candidate(shift, gain, offset, float(peak), cov)
+
+
+def _match_covariance(patch, template, mask, gain: float) -> np.ndarray:
+    """The re-acquired shift's covariance (px²): the least squares of the unsmoothed frame on the
+    template (gradients lightly smoothed) at the integer peak, whose residuals say how well the
+    object still looks like its template, plus the parabola's sub-pixel error
+    (:data:`PARABOLA_VARIANCE_PX2`)."""
+    gx, gy = five_point_gradients(cv2.GaussianBlur(template, (0, 0), MATCH_GRADIENT_SIGMA))
+    t = template[mask].astype(np.float64)
+    i = patch[mask].astype(np.float64)
+    level_gain = float(np.cov(i, t)[0, 1] / np.var(t, ddof=1))
+    residual = i - level_gain * t - float(i.mean() - level_gain * t.mean())
+    jac = gain * np.stack([gx[mask], gy[mask]], axis=1).astype(np.float64)
+    return least_squares_covariance(jac, residual) + PARABOLA_VARIANCE_PX2 * np.eye(2)

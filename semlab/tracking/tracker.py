@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import inspect
 
 import cv2
@@ -11,13 +12,14 @@ from ..roi import as_gray_float, check_roi, roi_centre
 from ..subpixel import NoiseModel, estimate_noise
 from ..template import ContourTemplate, identify_contour_template
 from .band import MIN_BAND_PIXELS, background_texture, band_widths, registration_band
-from .frames import as_frame
+from .frames import GrayScale, as_frame
 from .ic import ICMethod
 from .method import Method, Motion, Setup, Verdict
 from .options import DEFAULT_METHOD, KEYWORD_GROUP, TrackerOptions
 from .paper import ContourMethod, HBMethod, SSDMethod
 from .result import TrackResult
 from .search import search_window
+from .uncertainty import too_uncertain
 
 __all__ = ["METHOD_CLASSES", "Tracker"]
 
@@ -26,8 +28,10 @@ METHOD_CLASSES: dict[str, type[Method]] = {"ic": ICMethod, "contour": ContourMet
                                            "hb": HBMethod}
 #: The smallest ROI (px a side) that holds a contour template and its band.
 MIN_ROI_PX = 16
-#: The contour must enclose a contrast of at least this many noise standard deviations.
-MIN_CONTRAST_NOISE = 2.0
+#: The contour must enclose a contrast of at least this many standard deviations of the noise of the
+#: smoothed ROI it was found in (a 3σ separation of the object's and the background's levels: below,
+#: Otsu's threshold splits noise).
+MIN_CONTRAST_NOISE = 3.0
 #: A frame must exceed the ROI by this many px (each dimension) to be searched.
 FRAME_OVER_ROI_PX = 4
 #: What a method may raise on a frame it cannot handle: the frame is lost, never the run.
@@ -120,6 +124,12 @@ class Tracker:
         ``"ic"``: a frame also counts as lost when its score falls below this fraction of the
         typical score of the first frames (low-dose images have low correlations even when
         right).
+    max_sigma : float or None
+        ``"ic"``: an answer whose frame allows no better than this many px (the fits' part of
+        ``sigma_x`` or ``sigma_y``, :mod:`semlab.tracking.uncertainty`) is reported ``ok=False``
+        ("too uncertain"; the tracker follows it all the same). The default,
+        :data:`~semlab.tracking.uncertainty.SIGMA_LIMIT_PX`, keeps frames more than 1 px off below
+        0.5 %; None never flags.
 
     An unknown keyword raises TypeError with the list of the allowed ones; the options, checked
     and grouped by concern, are :attr:`options` (:class:`~semlab.tracking.options.TrackerOptions`).
@@ -164,6 +174,9 @@ class Tracker:
             Bad frame (dtype, dimensions, NaN/inf, empty), ROI not wholly inside the frame or too
             small, a constant ROI, or no usable contour in the ROI.
         """
+        as_gray_float(frame)  # a clear error for a bad frame 0, before anything is scaled
+        self.scale = GrayScale.of(frame)
+        frame = self.scale.apply(np.asarray(frame))
         image = as_gray_float(frame)
         roi = check_roi(roi, image.shape, min_size=MIN_ROI_PX)
         x0, y0, w, h = roi
@@ -172,13 +185,13 @@ class Tracker:
             raise ValueError(f"the ROI {roi} is constant: nothing to track")
         # The frame's own gray levels (uint8 as they are), so a manual threshold means the same
         # here as in identify_contour_template and the TemplateExplorer.
-        raw = np.asarray(frame)[y0:y0 + h, x0:x0 + w]
+        raw = GrayScale.as_8bit(np.asarray(frame)[y0:y0 + h, x0:x0 + w])
         contour = identify_contour_template(raw, **self.options.template.as_kwargs())
         # How identify_contour_template mapped frame 0's gray levels onto 0-255 (uint8 as they are).
         to_8bit = (0.0, 1.0) if raw.dtype == np.uint8 else (
             float(patch.min()), 255.0 / max(float(patch.max() - patch.min()), 1e-12))
         noise = estimate_noise(patch)
-        _check_contrast(patch, contour, noise, roi)
+        _check_contrast(patch, contour, noise, roi, self.options.template.sigma)
         self.texture = background_texture(patch, contour.region, noise)
         widths = self.band_widths()
         band = registration_band(contour, widths)
@@ -192,7 +205,8 @@ class Tracker:
         self.algorithm, self.noise, self.roi = algorithm, noise, roi
         self.motion = Motion()
         self.centre0 = np.array(roi_centre(roi))
-        return TrackResult(float(self.centre0[0]), float(self.centre0[1]), 1.0, True)
+        # Frame 0 is the origin of every displacement: its position is the ROI's centre by definition.
+        return TrackResult(float(self.centre0[0]), float(self.centre0[1]), 1.0, True, sigma_x=0.0, sigma_y=0.0)
 
     def band_widths(self) -> tuple[int, int]:
         """How far (px) the registration band reaches from the contour: ``(background, object)``
@@ -275,7 +289,7 @@ class Tracker:
         if self.roi is None:
             raise RuntimeError("call init(frame, roi) before update(frame)")
         try:
-            arr = as_frame(frame)
+            arr = self.scale.apply(as_frame(frame))
         except (TypeError, ValueError) as err:
             return self._lose(f"unusable frame: {err}")
         if arr.shape[0] < self.roi[3] + FRAME_OVER_ROI_PX or arr.shape[1] < self.roi[2] + FRAME_OVER_ROI_PX:
@@ -305,10 +319,22 @@ class Tracker:
         motion = self.motion
         motion.prediction_error = np.inf if verdict.reacquired else float(np.hypot(*(verdict.shift - predicted)))
         result = self._accept(verdict.shift, verdict.score)
+        uncertainty = self.algorithm.sigma(verdict)
+        limit = self.options.loss.max_sigma
+        if (uncertainty is not None and limit is not None and self.algorithm.flags_uncertain
+                and too_uncertain(uncertainty.precision, limit)):
+            # Followed (the motion moves on, the next frame starts from here) but not trusted: a
+            # flag is better than a number that may be a pixel off. It does not enter the template.
+            p = uncertainty.precision
+            return TrackResult(float("nan"), float("nan"), result.score, False,
+                               f"too uncertain: the frame allows ({p[0]:.2f}, {p[1]:.2f}) px > max_sigma {limit:g} px")
         moved = self.algorithm.after_accept(arr, verdict)
         if moved is not None:  # the template's origin moved: the state follows (the position stays)
             motion.shift = motion.shift + moved
-        return result
+        if uncertainty is None:
+            return result
+        sx, sy = uncertainty.sigma
+        return dataclasses.replace(result, sigma_x=float(sx), sigma_y=float(sy))
 
     def _lose(self, reason: str) -> TrackResult:
         motion = self.motion
@@ -336,12 +362,29 @@ Tracker.__init__.__annotations__ = {name: p.annotation for name, p in Tracker.__
                                     if p.annotation is not inspect.Parameter.empty}
 
 
-def _check_contrast(patch, contour: ContourTemplate, noise: NoiseModel, roi) -> None:
-    """ValueError when the contour encloses no more contrast than twice the noise: noise, not a probe."""
+def smoothed_noise_sd(noise: NoiseModel, level: float, sigma_px: float) -> float:
+    """Standard deviation (gray levels) of the noise at ``level`` after the template identification's
+    Gaussian smoothing of ``sigma_px`` (:func:`semlab.template.identify_contour_template`): the
+    smoothing averages the white noise down, less along the scan line, whose noise is correlated
+    (AR(1), ``noise.rho``)."""
+    sd = float(np.sqrt(noise.variance(level)))
+    if sigma_px <= 0:
+        return sd
+    kernel = cv2.getGaussianKernel(2 * int(np.ceil(4 * sigma_px)) + 1, sigma_px).ravel()
+    lags = np.abs(np.subtract.outer(np.arange(kernel.size), np.arange(kernel.size)))
+    along_line = float(kernel @ (noise.rho ** lags) @ kernel)
+    across = float(kernel @ kernel)
+    return sd * float(np.sqrt(along_line * across))
+
+
+def _check_contrast(patch, contour: ContourTemplate, noise: NoiseModel, roi, sigma_px: float) -> None:
+    """ValueError when the contour encloses no more contrast than the noise of the smoothed image in
+    which it was found (:data:`MIN_CONTRAST_NOISE` standard deviations): noise, not a probe."""
     region = contour.region
     if region.any() and not region.all():
         contrast = abs(float(patch[region].mean() - patch[~region].mean()))
-        sigma = float(np.sqrt(noise.variance(float(patch.mean()))))
-        if contrast < MIN_CONTRAST_NOISE * sigma:
+        sd = smoothed_noise_sd(noise, float(patch.mean()), sigma_px)
+        if contrast < MIN_CONTRAST_NOISE * sd:
             raise ValueError(f"no object in the ROI {roi}: the contour encloses a contrast of {contrast:.3g} gray levels, "
-                             f"less than twice the noise ({sigma:.3g}); this is noise, not a probe")
+                             f"less than {MIN_CONTRAST_NOISE:g} times the noise of the smoothed ROI ({sd:.3g}); "
+                             "this is noise, not a probe")
