@@ -163,7 +163,7 @@ class Method:
     def sigma(self, verdict: Verdict):
         """The accepted position's :class:`~semlab.tracking.uncertainty.Uncertainty`, or None when
         the method cannot tell."""
-        return None
+        return
 
     def after_accept(self, arr, verdict: Verdict) -> np.ndarray | None:
         """Work on an accepted frame (``"ic"``: the template averaging); returns the change of

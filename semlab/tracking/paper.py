@@ -31,7 +31,12 @@ from ..matching import (
     offline_matrix,
     ssd_match,
 )
-from ..subpixel import five_point_gradients, gradient_subpixel_shift, sample_shifted_filtered, weighted_ncc
+from ..subpixel import (
+    five_point_gradients,
+    gradient_subpixel_shift,
+    sample_shifted_filtered,
+    weighted_ncc,
+)
 from ..template import to_uint8
 from .band import contour_core, inner_mask
 from .frames import crop

@@ -8,8 +8,8 @@ import pandas as pd
 
 from ..protocols import VisualTracker
 from .frames import is_roi_list, iter_frames
-from .result import TrackResult
 from .options import DEFAULT_METHOD
+from .result import TrackResult
 from .tracker import Tracker
 
 __all__ = ["follow_frames", "start_trackers", "track"]

@@ -22,8 +22,17 @@ from typing import NamedTuple
 
 import numpy as np
 
-__all__ = ["Uncertainty", "CALIBRATION", "INTEGER_VARIANCE_PX2", "MODEL_ERROR_PX", "model_error", "SIGMA_LIMIT_PX", "least_squares_covariance", "position_sigma",
-           "too_uncertain"]
+__all__ = [
+    "CALIBRATION",
+    "INTEGER_VARIANCE_PX2",
+    "MODEL_ERROR_PX",
+    "SIGMA_LIMIT_PX",
+    "Uncertainty",
+    "least_squares_covariance",
+    "model_error",
+    "position_sigma",
+    "too_uncertain",
+]
 
 #: A frame is not trusted above this standard uncertainty (px, either axis). A silent error is an
 #: ok frame more than 1 px off; for a calibrated Gaussian error of standard deviation σ per axis,
