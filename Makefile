@@ -12,14 +12,19 @@ ARGS   ?=
 ROOT_FLAG := $(shell [ "$$(id -u)" = 0 ] && echo --allow-root)
 PYTEST_ARGS ?=
 
-.PHONY: setup lab test test-fast bench chromium strip lint clean
+.PHONY: setup lab test test-fast bench chromium strip lint clean mutate
 
 setup: $(STAMP)
 
-$(STAMP): pyproject.toml
+# JupyterLab settings of this .venv: save the widgets' state in a notebook when it is saved (ipywidgets'
+# default is not to), so a saved notebook reopens with its widgets, not "Error displaying widget: model not found".
+LAB_OVERRIDES := $(VENV)/share/jupyter/lab/settings/overrides.d
+
+$(STAMP): pyproject.toml etc/jupyterlab/semlab.json
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --disable-pip-version-check -e '.[dev]'
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check -e '.[dev,fibsem]'
 	$(BIN)/python -m ipykernel install --sys-prefix --name python3 --display-name "Python 3 (semlab)" >/dev/null
+	@mkdir -p $(LAB_OVERRIDES) && cp etc/jupyterlab/semlab.json $(LAB_OVERRIDES)/semlab.json
 	@touch $(STAMP)
 
 lab: $(STAMP)
@@ -45,6 +50,14 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_tracking.py
 	$(BIN)/python benchmarks/bench_tracking_seeds.py
 	$(BIN)/python benchmarks/bench_servo.py
+	nice -n 10 $(BIN)/python benchmarks/bench_corpus.py
+
+# Mutation testing of the core modules ([tool.mutmut] in pyproject.toml; slow, not in CI: the fixed
+# sample in tests/test_mutants.py is). Niced, 2 workers; `make mutate ARGS='semlab.control.*'` runs a subset.
+# The table per module: $(BIN)/python benchmarks/mutation_report.py (reads mutants/).
+mutate: $(STAMP)
+	nice -n 10 $(BIN)/mutmut run --max-children 2 $(ARGS)
+	$(BIN)/python benchmarks/mutation_report.py
 
 strip: $(STAMP)
 	$(BIN)/nbstripout --keep-id notebooks/*.ipynb

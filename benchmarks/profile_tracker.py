@@ -35,8 +35,8 @@ def profile(kind: str, seed: int = 0, repeats: int = 3, clock=time.perf_counter)
         t.init(seq.frames[0], seq.roi)
         run, cls = [], []
         for frame in seq.frames[1:]:
-            averaging = t._stack is not None
-            steady = t._last_prediction_error < 1.0
+            averaging = t.algorithm.averager is not None
+            steady = t.motion.prediction_error < 1.0
             t0 = clock()
             t.update(frame)
             run.append(1e3 * (clock() - t0))

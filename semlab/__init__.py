@@ -7,6 +7,7 @@ The handful of calls a notebook or a script needs, after Ru et al. (2012),
   :func:`identify_contour_template`, :func:`adaptive_canny_thresholds`
 - control: :func:`characterise_hysteresis`, :func:`fit_hysteresis`, :func:`step_response`,
   :func:`step_metrics`, :func:`move_probe_to` (a point of the image, several axes at once)
+- evaluation: :func:`evaluate` (the scene-family corpus, :mod:`semlab.evaluation`)
 - data: :func:`read_frames`, :func:`read_image`, :func:`load_sample` (the samples in ``data/``)
 - widgets: :class:`TemplateExplorer`, :class:`TrackingPlayer`, :class:`ServoPanel`; figures in :mod:`semlab.plots`
 - the simulated rig lives in :mod:`semlab.sim`, the hardware protocols in :mod:`semlab.protocols`.
@@ -30,6 +31,8 @@ _EXPORTS = {
     "canny_edges": "semlab.edges",
     "gradient_subpixel_shift": "semlab.subpixel",
     "tracking_errors": "semlab.metrics",
+    # the scene-family corpus every tracking figure is measured on
+    "evaluate": "semlab.evaluation",
     "MatchTemplatePeer": "semlab.peers",
     "ECCPeer": "semlab.peers",
     "PhaseCorrelationPeer": "semlab.peers",
@@ -38,15 +41,15 @@ _EXPORTS = {
     "identify_contour_template": "semlab.template",
     "adaptive_canny_thresholds": "semlab.edges",
     # hysteresis and visual servo
-    "characterise_hysteresis": "semlab.hysteresis",
+    "characterise_hysteresis": "semlab.experiments",
     "fit_hysteresis": "semlab.hysteresis",
     "step_response": "semlab.control",
     "step_metrics": "semlab.control",
     "move_to": "semlab.control",
-    "drive_voltages": "semlab.control",
-    "characterise_creep": "semlab.hysteresis",
-    "fit_creep": "semlab.hysteresis",
-    "CreepModel": "semlab.hysteresis",
+    "drive_voltages": "semlab.experiments",
+    "characterise_creep": "semlab.experiments",
+    "fit_creep": "semlab.creep",
+    "CreepModel": "semlab.creep",
     "PolynomialHysteresis": "semlab.hysteresis",
     "PIHysteresis": "semlab.hysteresis",
     "PID": "semlab.control",
@@ -72,6 +75,9 @@ _EXPORTS = {
     # protocols
     "Microscope": "semlab.protocols",
     "Axis": "semlab.protocols",
+    # closed-loop positioners (FIB/SEM manipulators, semlab.instruments)
+    "Positioner": "semlab.protocols",
+    "calibrate_positioner": "semlab.positioning",
 }
 
 __all__ = sorted(_EXPORTS) + ["__version__"]  # noqa: PLE0605 (built from the lazy export table)

@@ -34,6 +34,7 @@ import numpy as np
 import pandas as pd
 
 from semlab.hysteresis import axis_identity
+from semlab.measure import default_tracker, read_result, start_point
 from semlab.protocols import check_command
 
 __all__ = [
@@ -42,7 +43,6 @@ __all__ = [
     "VisualServo",
     "axis_reach",
     "check_in_frame",
-    "drive_voltages",
     "move_to",
     "step_metrics",
     "step_response",
@@ -55,98 +55,10 @@ RESPONSE_COLUMNS = ("frame", "t", "u", "x", "y", "displacement", "target", "ok")
 REFERENCE_FRAMES = 8
 
 
-def _default_tracker(tracker, *, jump_px: float | None = None, roi=None):
-    """The given tracker, or ``semlab.tracking.Tracker()``; when the caller is about to make the probe
-    jump by ``jump_px`` in one frame (feed-forward), the default tracker's search window is widened so
-    that the jump stays inside it (the paper's 300x300 window around a 200x200 ROI allows +-50 px)."""
-    if tracker is None:
-        from semlab.tracking import Tracker
-
-        if jump_px is not None and roi is not None:
-            side = max(float(roi[2]), float(roi[3])) + 2.0 * math.ceil(1.1 * abs(jump_px) + 20.0)
-            try:
-                return Tracker(search_size=int(max(300, side)))
-            except TypeError:  # a tracker without a search window
-                return Tracker()
-        return Tracker()
-    if not (callable(getattr(tracker, "init", None)) and callable(getattr(tracker, "update", None))):
-        raise TypeError(f"tracker must have init(frame, roi) and update(frame); got {type(tracker).__name__}")
-    return tracker
-
-
 def _warmup_frames(value) -> int:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
         raise ValueError(f"warmup_frames must be a non-negative integer, got {value!r}")
     return int(value)
-
-
-def _read_result(res):
-    """(x, y, score, ok) from a tracker result (attributes or a 4-tuple)."""
-    if all(hasattr(res, a) for a in ("x", "y", "ok")):
-        x, y, ok = res.x, res.y, res.ok
-        score = getattr(res, "score", float("nan"))
-    else:
-        x, y, score, ok = res
-    return float(x), float(y), float(score) if score is not None else float("nan"), bool(ok)
-
-
-def _roi_centre(roi):
-    try:
-        x, y, w, h = (float(v) for v in roi)
-    except (TypeError, ValueError):
-        raise ValueError(f"roi must be (x, y, w, h), got {roi!r}") from None
-    if not (w > 0 and h > 0) or not all(map(math.isfinite, (x, y, w, h))):
-        raise ValueError(f"roi {roi!r} must have finite coordinates and positive size")
-    return x + (w - 1) / 2.0, y + (h - 1) / 2.0
-
-
-def _progress(iterable, enabled, desc, total=None):
-    if not enabled:
-        return iterable
-    from tqdm.auto import tqdm
-
-    return tqdm(iterable, desc=desc, total=total, leave=False)
-
-
-def drive_voltages(microscope, axis, tracker, voltages, *, settle_frames: int = 1, model=None,
-                   progress: bool = False, desc: str = "driving") -> pd.DataFrame:
-    """Apply a voltage path one increment per frame while an initialised tracker follows the probe.
-
-    Parameters
-    ----------
-    microscope, axis
-        :class:`~semlab.protocols.Microscope` and :class:`~semlab.protocols.Axis`.
-    tracker
-        Already initialised (``init`` called on the current frame).
-    voltages : (N,) array_like
-        Commands in volts; each must lie within ``axis.limits``.
-    settle_frames : int
-        Frames grabbed per command; the last one's measurement is recorded.
-    model : HysteresisModel, optional
-        Shadow model that is told every command (keeps its reversal memory in step with the axis).
-
-    Returns
-    -------
-    DataFrame
-        ``frame, t, u, x, y, score, ok``, one row per command (``frame`` counts grabs since the call).
-    """
-    volts = np.asarray(voltages, dtype=float).ravel()
-    lim = tuple(float(v) for v in axis.limits)
-    for v in volts:
-        check_command(v, lim, "drive_voltages")
-    dt = float(microscope.frame_period)
-    rows, n = [], 0
-    for u in _progress(volts, progress, desc):
-        axis.apply(float(u))
-        if model is not None:
-            model.forward(min(max(float(u), model.u_range[0]), model.u_range[1]))
-        for _ in range(int(settle_frames)):
-            frame = microscope.grab()
-            n += 1
-            x, y, score, ok = _read_result(tracker.update(frame))
-        ok = ok and math.isfinite(x) and math.isfinite(y)
-        rows.append((n, n * dt, float(u), x, y, score, ok))
-    return pd.DataFrame(rows, columns=["frame", "t", "u", "x", "y", "score", "ok"])
 
 
 @dataclass
@@ -223,14 +135,17 @@ class PID:
         self._p = self.kp * e
         lo, hi = self.output_limits
         integral = self.integral + self.ki * e
-        # anti-windup (1): the integral never drives the output past its limits (back-calculation)
-        integral = min(max(integral, lo - self._p - self._d), hi - self._p - self._d)
+        # anti-windup (1): the integral never drives the output past its limits (back-calculation);
+        # without an integrator (ki = 0) there is nothing to wind up and the integral keeps its value
+        if self.ki > 0:
+            integral = min(max(integral, lo - self._p - self._d), hi - self._p - self._d)
         raw = self._p + integral + self._d
         out = min(max(raw, lo), hi)
         slewed = min(max(out, self.output - self.slew_limit), self.output + self.slew_limit)
-        # anti-windup (2): while the slew limit holds the output back, do not integrate further
-        if slewed != out and (slewed - out) * e < 0:
-            integral = self.integral
+        # anti-windup (2): while the slew limit holds the output back, the integral is back-calculated
+        # to the output given (it grows no faster than the output may), so P + I + D stays the output
+        if slewed != out and self.ki > 0:
+            integral = slewed - self._p - self._d
         self.integral = integral
         self.output = slewed
         return slewed
@@ -239,7 +154,9 @@ class PID:
         """Tell the controller the output actually used after limits further downstream (axis limits,
         voltage slew): the integral is back-calculated so that it does not wind up against them."""
         applied = float(applied)
-        if applied < self.output:
+        if self.ki == 0:  # no integrator: nothing to wind up
+            pass
+        elif applied < self.output:
             self.integral = min(self.integral, applied - self._p - self._d)
         elif applied > self.output:
             self.integral = max(self.integral, applied - self._p - self._d)
@@ -306,7 +223,7 @@ def tracked_position(tracker, frame, index: int) -> tuple[float, float, bool]:
     ValueError
         If the tracker reports ``ok=True`` with a non-finite position: a servo must not drive blind.
     """
-    x, y, _, ok = _read_result(tracker.update(frame))
+    x, y, _, ok = read_result(tracker.update(frame))
     if ok and not (math.isfinite(x) and math.isfinite(y)):
         raise ValueError(f"tracker reported ok=True with a non-finite position ({x}, {y}) at frame {index}; "
                          "refusing to drive blind")
@@ -573,7 +490,7 @@ class VisualServo:
                              ki_fine=ki_fine, fine_band_px=fine_band_px, ff_margin=ff_margin,
                              max_slew_v=max_slew_v, max_step_px=max_step_px)
         self.axis, self.model = axis, model
-        self.tracker = _default_tracker(tracker)
+        self.tracker = default_tracker(tracker)
         self.warmup_frames = _warmup_frames(warmup_frames)
         self.direction = np.asarray(model.direction, dtype=float)
         self.rows: list[dict] = []
@@ -598,7 +515,7 @@ class VisualServo:
         RuntimeError
             If the tracker has lost the probe at the end of the warm-up (nothing has moved).
         """
-        self.p0 = np.array(_roi_centre(roi))
+        self.p0 = np.array(start_point(roi))
         self.roi = tuple(roi)
         frame = self.microscope.grab()
         self.frame_shape = np.shape(frame)
@@ -617,7 +534,7 @@ class VisualServo:
             return info
         pts = []
         for _ in range(n):
-            x, y, _, ok = _read_result(self.tracker.update(self.microscope.grab()))
+            x, y, _, ok = read_result(self.tracker.update(self.microscope.grab()))
             pts.append((x, y) if ok and math.isfinite(x) and math.isfinite(y) else (math.nan, math.nan))
         pts = np.array(pts)
         good = np.isfinite(pts[:, 0])
@@ -802,7 +719,7 @@ def step_response(microscope, axis, roi, step_px, *, model, feedforward=True, n_
         raise TypeError(f"step_response got unknown parameter(s) {sorted(unknown)}; allowed: {sorted(allowed)}")
     if params.get("tracker") is None:
         jump = abs(step_px) if params.get("max_step_px") is None else min(abs(step_px), params["max_step_px"])
-        params["tracker"] = _default_tracker(None, jump_px=jump, roi=roi)
+        params["tracker"] = default_tracker(None, jump_px=jump, roi=roi)
     servo = VisualServo(microscope, axis, model, feedforward=feedforward, **params)
     servo.loop.check_reach(step_px, 0.0, "step of")  # refuse an unreachable step before anything moves
     servo.start(roi)
@@ -915,3 +832,12 @@ def step_metrics(response: pd.DataFrame, *, final_frames: int = 30) -> pd.Series
     out["final_error_px"] = out["final_mean_px"] - step
     out["n_lost"] = int((~ok).sum())
     return pd.Series(out)
+
+
+# drive_voltages, an experiment on the rig, moved to semlab.experiments; its old import path keeps working.
+def __getattr__(name: str):
+    if name == "drive_voltages":
+        from semlab.experiments import drive_voltages
+
+        return drive_voltages
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -1,4 +1,4 @@
-"""Piezo hysteresis: characterisation by visual tracking, models and their inverses.
+"""Piezo hysteresis: models and their inverses, fitted to a characterisation by visual tracking.
 
 The paper (Ru et al., "Visual Servo Control Incorporating a Feed-Forward Controller", Fig. 8)
 characterises one piezo axis by applying voltages incrementally from U0 to Un and back while the visual
@@ -6,10 +6,10 @@ tracker records the probe displacement, fits the ascending and descending major 
 with fourth-order polynomials, describes curves that start at a reversal inside the loop with eq. 11,
 and inverts the model by Newton-Raphson to obtain the feed-forward command.
 
-This module provides
+This module provides the models; the experiment that measures them (the voltage path of Fig. 8b and
+:func:`semlab.experiments.characterise_hysteresis`) drives a rig and lives in :mod:`semlab.experiments`,
+the creep law in :mod:`semlab.creep` (their old import paths from here keep working):
 
-* :func:`characterise_hysteresis` -- the experiment of Fig. 8b on any :class:`~semlab.protocols.Microscope`
-  / :class:`~semlab.protocols.Axis` pair, with inner loops, the displacement measured by the tracker;
 * :class:`PolynomialHysteresis` -- Pn, Dn, eq. 11, its mirror for reversals on the ascending branch,
   reversal-point memory (wiping-out) and the Newton-Raphson inverse;
 * :class:`PIHysteresis` -- a Prandtl-Ishlinskii model (play operators, weights by bounded/non-negative
@@ -24,8 +24,11 @@ Both models share one interface: ``forward`` (commit voltages, return displaceme
 The characterised range ``u_range`` limits what the model *knows*, not where the axis may go: beyond it
 the models extrapolate linearly (:attr:`HysteresisModel.extrapolation_slopes`, deliberately steeper than
 anything measured, so that a feed-forward move beyond the range stops short rather than overshoots) and
-keep their memory consistent (passing an end of the range wipes the memory out, as reaching it does).
-The axis limits are the servo's business (:mod:`semlab.control`).
+remember an excursion out there like any other history (the curve back from it starts at it). The axis
+limits are the servo's business (:mod:`semlab.control`).
+
+Displacements are in image pixels along the measured image direction of the axis; the sign is chosen
+so that rising voltage increases the displacement.
 
 Displacements are in image pixels along the measured image direction of the axis; the sign is chosen
 so that rising voltage increases the displacement.
@@ -44,29 +47,18 @@ from .protocols import as_finite
 
 __all__ = [
     "BRANCHES",
-    "CreepModel",
     "HysteresisModel",
     "HysteresisState",
     "PIHysteresis",
     "PolynomialHysteresis",
     "axis_identity",
-    "characterisation_voltages",
-    "characterise_creep",
-    "characterise_hysteresis",
-    "fit_creep",
     "fit_hysteresis",
     "inner_loop_displacement",
-    "label_branches",
     "play_operator",
 ]
 
 #: Branch labels used in a characterisation DataFrame.
 BRANCHES = ("ascending", "descending", "inner_ascending", "inner_descending")
-
-#: Default turning points (fractions of the range) after the major loop. The path reverses on the
-#: ascending branch (mirror of eq. 11), nests a second and third-order loop that closes again, then
-#: reverses on the descending branch (eq. 11 itself) and nests once more.
-DEFAULT_INNER_TURNS = (0.75, 0.25, 0.6, 0.4, 1.0, 0.3, 0.8, 0.5, 0.0)
 
 #: Beyond the characterised range the models extrapolate linearly with this many times the steepest
 #: slope of their major loop. A piezo's gain keeps growing with the voltage (the simulated Preisach
@@ -74,7 +66,6 @@ DEFAULT_INNER_TURNS = (0.75, 0.25, 0.6, 0.4, 1.0, 0.3, 0.8, 0.5, 0.0)
 #: 100 V), and a model that is too steep only makes the feed-forward stop short, which the feedback
 #: finishes, while one that is too shallow makes it overshoot.
 EXTRAPOLATION_SLOPE_FACTOR = 1.25
-
 
 # ---------------------------------------------------------------------------------------------
 # helpers
@@ -124,82 +115,6 @@ def play_operator(u, r: float, z0: float | None = None) -> np.ndarray:
         z = max(uk - r, min(uk + r, z))
         out[k] = z
     return out
-
-
-def label_branches(voltages, u_min: float, u_max: float) -> list[str]:
-    """Label each voltage of a path with its hysteresis branch, using the wiping-out rule.
-
-    A point is on a major branch (``'ascending'``/``'descending'``) when no reversal point inside the
-    range is remembered, otherwise on an inner curve (``'inner_ascending'``/``'inner_descending'``).
-    The path is assumed to start at ``u_min`` after a descent (the preconditioned state).
-    """
-    u_prev, rising, stack = float(u_min), True, []
-    labels = []
-    for u in np.asarray(voltages, dtype=float):
-        if u != u_prev:
-            now_rising = u > u_prev
-            if now_rising != rising and u_min < u_prev < u_max:
-                stack.append(u_prev)
-            rising = now_rising
-            # wiping-out: passing the remembered turning point of the opposite kind closes the loop
-            while len(stack) >= 2 and ((rising and u >= stack[-2]) or (not rising and u <= stack[-2])):
-                del stack[-2:]
-            if u <= u_min or u >= u_max:
-                stack.clear()
-            u_prev = float(u)
-        major = not stack
-        labels.append(("" if major else "inner_") + ("ascending" if rising else "descending"))
-    return labels
-
-
-def characterisation_voltages(u_min: float, u_max: float, n_steps: int = 30, inner_loops=True) -> pd.DataFrame:
-    """The voltage path of a characterisation (paper, Fig. 8b), without applying it.
-
-    Parameters
-    ----------
-    u_min, u_max : float
-        ``U0`` and ``Un`` in volts.
-    n_steps : int
-        Increments per major branch (the step is ``(Un - U0) / n_steps``).
-    inner_loops : bool or sequence of float
-        ``True`` appends :data:`DEFAULT_INNER_TURNS` (turning points as fractions of the range) after
-        the major loop, ``False`` only the major loop; a sequence gives the turning points explicitly.
-
-    Returns
-    -------
-    DataFrame
-        Columns ``step, segment, u, branch``. Segment 0 is the ascending major branch, 1 the
-        descending one, 2... the inner-loop segments.
-    """
-    u_min, u_max = as_finite(u_min, "u_min"), as_finite(u_max, "u_max")
-    if not u_min < u_max:
-        raise ValueError(f"u_min={u_min} must be below u_max={u_max}")
-    n_steps = int(n_steps)
-    if n_steps < 2:
-        raise ValueError(f"n_steps={n_steps}: at least 2 increments per branch are needed")
-    turns = [1.0, 0.0]
-    if inner_loops is True:
-        turns += list(DEFAULT_INNER_TURNS)
-    elif inner_loops not in (False, None):
-        turns += [float(f) for f in inner_loops]
-    if any(not 0.0 <= f <= 1.0 for f in turns):
-        raise ValueError(f"inner-loop turning points must be fractions in [0, 1], got {turns}")
-    span = u_max - u_min
-    us, segs = [], []
-    f_prev = 0.0
-    for seg, f in enumerate(turns):
-        n = max(1, round(abs(f - f_prev) * n_steps))
-        fr = np.linspace(f_prev, f, n + 1)[1:]
-        us.extend(u_min + fr * span)
-        segs.extend([seg] * n)
-        f_prev = f
-    # the very first point: U0 itself, on the ascending major branch
-    us = [u_min] + us
-    segs = [0] + segs
-    u = np.clip(np.asarray(us), u_min, u_max)
-    return pd.DataFrame(
-        {"step": np.arange(len(u)), "segment": segs, "u": u, "branch": label_branches(u, u_min, u_max)}
-    )
 
 
 # ---------------------------------------------------------------------------------------------
@@ -814,7 +729,7 @@ def fit_hysteresis(characterisation: pd.DataFrame, kind: str = "polynomial", *, 
     Parameters
     ----------
     characterisation : DataFrame
-        From :func:`characterise_hysteresis` (columns ``u, displacement, branch`` and optionally ``ok``;
+        From :func:`~semlab.experiments.characterise_hysteresis` (columns ``u, displacement, branch`` and optionally ``ok``;
         ``attrs`` ``axis``, ``direction``, ``u_min``, ``u_max``). Rows with ``ok=False`` are excluded.
     kind : {"polynomial", "pi", "linear"}
         ``"polynomial"``: the paper's 4th-order :math:`P_n, D_n` fitted to the major branches (with the
@@ -965,249 +880,16 @@ def _fit_pi(char, u_range, n_operators, shape, kw):
     return PIHysteresis(x[:n_operators], x[n_operators], u_range, shape=float(shape), **kw)
 
 
-# ---------------------------------------------------------------------------------------------
-# characterisation on a microscope / axis pair
-# ---------------------------------------------------------------------------------------------
+# What drives a rig (and plans its voltages) moved to semlab.experiments, the creep law to
+# semlab.creep; their old import paths keep working.
+_MOVED = {"characterise_hysteresis": "experiments", "characterise_creep": "experiments",
+          "characterisation_voltages": "experiments", "label_branches": "experiments",
+          "DEFAULT_INNER_TURNS": "experiments", "CreepModel": "creep", "fit_creep": "creep"}
 
 
-def characterise_hysteresis(microscope, axis, roi, *, u_min=None, u_max=None, n_steps: int = 30,
-                            inner_loops=True, settle_frames: int = 1, u_start=None,
-                            precondition: bool = True, tracker=None, axis_name=None,
-                            progress: bool = False) -> pd.DataFrame:
-    """Characterise the hysteresis of one actuator axis with the visual tracker (paper, Fig. 8b).
+def __getattr__(name: str):
+    if name in _MOVED:
+        import importlib
 
-    Voltages are applied incrementally from U0 to Un and back (then along inner loops), one increment
-    per frame; each command acts from the next frame, so after ``settle_frames`` grabbed frames the probe
-    position measured by the tracker is recorded. The image direction of the axis is measured by a
-    principal-component fit of the tracked positions, and the displacement is projected on it.
-
-    Parameters
-    ----------
-    microscope : Microscope
-        Source of frames (``frame_period``, ``grab()``).
-    axis : Axis
-        Actuator channel (``limits``, ``apply(volts)``).
-    roi : (x, y, w, h)
-        Probe's ROI in the current frame.
-    u_min, u_max : float, optional
-        U0 and Un (default: the axis limits). A sub-range keeps the probe in view.
-    n_steps : int
-        Increments per major branch.
-    inner_loops : bool or sequence of float
-        See :func:`characterisation_voltages`.
-    settle_frames : int
-        Frames grabbed per increment (>= 1); the last one is measured.
-    u_start : float, optional
-        The command the axis holds now (default: ``axis.command`` if the axis reports it, else U0).
-        The axis is ramped from there to U0 in increments so the tracker follows the probe.
-    precondition : bool
-        Run one unrecorded major loop first, so the recorded path starts on a known state (U0 after a
-        descent) -- the state :func:`fit_hysteresis` assumes.
-    tracker : object, optional
-        Anything with ``init(frame, roi)`` and ``update(frame) -> (x, y, score, ok)``; default
-        ``semlab.tracking.Tracker()``.
-    axis_name : str, optional
-        Identity stored with the data (default :func:`axis_identity`).
-    progress : bool
-        Show a tqdm progress bar.
-
-    Returns
-    -------
-    DataFrame
-        One row per increment: ``step, segment, u, branch, frame, t, x, y, score, ok, displacement``
-        (px along the measured direction, 0 at the first valid U0 point, rising with the voltage).
-        ``attrs``: ``axis, direction, origin, u_min, u_max, frame_period, settle_frames,
-        preconditioned, off_axis_rms_px, n_lost``.
-    """
-    from semlab.control import _default_tracker, drive_voltages
-
-    lo, hi = (float(v) for v in axis.limits)
-    u_min = lo if u_min is None else as_finite(u_min, "u_min")
-    u_max = hi if u_max is None else as_finite(u_max, "u_max")
-    if not lo <= u_min < u_max <= hi:
-        raise ValueError(f"need axis limit {lo} <= u_min={u_min} < u_max={u_max} <= axis limit {hi}")
-    if int(settle_frames) < 1:
-        raise ValueError("settle_frames must be >= 1 (commands act from the next frame)")
-    plan = characterisation_voltages(u_min, u_max, n_steps, inner_loops)
-    step_v = (u_max - u_min) / int(n_steps)
-    if u_start is None:
-        u_start = getattr(axis, "command", None)
-    u_start = u_min if u_start is None else as_finite(u_start, "u_start")
-    pre = list(np.linspace(u_start, u_min, max(1, math.ceil(abs(u_start - u_min) / step_v)) + 1)[1:])
-    if precondition:
-        up = np.linspace(u_min, u_max, int(n_steps) + 1)[1:]
-        pre += list(up) + list(up[::-1][1:]) + [u_min]
-    tracker = _default_tracker(tracker)
-    frame0 = microscope.grab()
-    tracker.init(frame0, roi)
-    n_pre = len(pre)
-    volts = np.concatenate([pre, plan["u"].to_numpy()])
-    run = drive_voltages(microscope, axis, tracker, volts, settle_frames=settle_frames, progress=progress,
-                         desc="characterising hysteresis")
-    rec = run.iloc[n_pre:].reset_index(drop=True)
-    df = plan.copy()
-    for c in ("frame", "t", "x", "y", "score", "ok"):
-        df[c] = rec[c].to_numpy()
-    ok = df["ok"].to_numpy(bool) & np.isfinite(df["x"].to_numpy(float)) & np.isfinite(df["y"].to_numpy(float))
-    df["ok"] = ok
-    pts = df.loc[ok, ["x", "y"]].to_numpy(float)
-    if pts.shape[0] < 3:
-        raise ValueError(f"the tracker followed the probe in only {pts.shape[0]} frame(s); nothing to fit")
-    centre = pts.mean(axis=0)
-    _, _, vt = np.linalg.svd(pts - centre, full_matrices=False)
-    direction = vt[0]
-    proj = (pts - centre) @ direction
-    if np.corrcoef(df.loc[ok, "u"].to_numpy(float), proj)[0, 1] < 0:
-        direction = -direction
-    origin = pts[0]
-    disp = np.full(len(df), np.nan)
-    disp[ok] = (pts - origin) @ direction
-    df["displacement"] = disp
-    off_axis = (pts - centre) @ np.array([-direction[1], direction[0]])
-    df.attrs.update(
-        axis=axis_name if axis_name is not None else axis_identity(axis),
-        direction=(float(direction[0]), float(direction[1])),
-        origin=(float(origin[0]), float(origin[1])),
-        u_min=u_min, u_max=u_max, frame_period=float(microscope.frame_period),
-        settle_frames=int(settle_frames), preconditioned=bool(precondition),
-        off_axis_rms_px=float(np.sqrt(np.mean(off_axis ** 2))), n_lost=int((~ok).sum()),
-    )
-    return df
-
-
-# ---------------------------------------------------------------------------------------------
-# creep
-# ---------------------------------------------------------------------------------------------
-
-
-class CreepModel:
-    """Logarithmic piezo creep, superposed over the displacement steps the controller commanded.
-
-    .. math:: c(t) = \\gamma \\sum_j \\Delta y_j \\log_{10}\\big(1 + (t - t_j)/t_0\\big)
-
-    the usual creep law of piezo actuators (e.g. Jung & Gweon 2000): after a step of
-    :math:`\\Delta y_j` at :math:`t_j` the actuator keeps moving by :math:`\\gamma` of the step per decade
-    of time. The feed-forward subtracts the predicted growth so that the PID does not have to chase it.
-
-    Parameters
-    ----------
-    gamma : float
-        Creep per decade as a fraction of the step (>= 0).
-    t0 : float
-        Time constant in s (> 0).
-    memory : int
-        Number of recent steps kept (older ones are frozen at their value).
-    """
-
-    def __init__(self, gamma: float, t0: float = 0.1, memory: int = 64):
-        gamma, t0 = as_finite(gamma, "creep gamma"), as_finite(t0, "creep t0")
-        if gamma < 0 or t0 <= 0 or int(memory) < 1:
-            raise ValueError("creep model needs gamma >= 0, t0 > 0 and memory >= 1")
-        self.gamma, self.t0, self.memory = gamma, t0, int(memory)
-        self.reset()
-
-    def reset(self) -> None:
-        """Forget every step."""
-        self._events: list[list[float]] = []
-        self._frozen = 0.0
-
-    def record(self, t: float, dy: float) -> None:
-        """A displacement step ``dy`` (px, as the hysteresis model predicts it) commanded at ``t`` (s)."""
-        if dy == 0.0:
-            return
-        if self._events and self._events[-1][0] == t:
-            self._events[-1][1] += dy
-            return
-        self._events.append([float(t), float(dy)])
-        if len(self._events) > self.memory:
-            t_old, d_old = self._events.pop(0)
-            self._frozen += d_old * self.gamma * math.log10(1.0 + max(t - t_old, 0.0) / self.t0)
-
-    def predict(self, t: float, extra=None) -> float:
-        """Creep displacement (px) at time ``t``; ``extra=(t_j, dy_j)`` adds one more (trial) step."""
-        c = self._frozen
-        events = self._events if extra is None else [*self._events, list(extra)]
-        for tj, dj in events:
-            if t > tj:
-                c += dj * self.gamma * math.log10(1.0 + (t - tj) / self.t0)
-        return c
-
-    def __repr__(self) -> str:
-        return f"<CreepModel gamma={self.gamma:.4g}/decade t0={self.t0:.3g} s>"
-
-
-def fit_creep(t, displacement, step_px, *, t0_grid=None) -> CreepModel:
-    """Fit the logarithmic creep law to a hold after one step.
-
-    Parameters
-    ----------
-    t : (N,) array_like
-        Seconds since the step was commanded (> 0), e.g. ``(k - 0.5) * frame_period`` for frame ``k``
-        after the command (the probe is imaged mid-frame).
-    displacement : (N,) array_like
-        Measured displacement (px) during the hold; NaN entries are ignored.
-    step_px : float
-        Size of the step (px).
-    t0_grid : array_like, optional
-        Candidate time constants (s). Default: 0.1 s only, the reference time of the usual law
-        (Jung & Gweon 2000, ``y(t) = y(0.1 s) [1 + gamma log10(t / 0.1 s)]``): a hold of a few seconds
-        measured with ~0.1 px noise cannot separate ``gamma`` and ``t0``.
-
-    Returns
-    -------
-    CreepModel
-        ``gamma`` by least squares for each ``t0`` (with a free offset), the best ``t0``.
-
-    References
-    ----------
-    Jung, H. & Gweon, D.-G. (2000). Creep characteristics of piezoelectric actuators.
-    Rev. Sci. Instrum. 71, 1896-1900.
-    """
-    t = np.asarray(t, float)
-    y = np.asarray(displacement, float)
-    step = as_finite(step_px, "step_px")
-    good = np.isfinite(t) & np.isfinite(y) & (t > 0)
-    if good.sum() < 4 or step == 0:
-        raise ValueError("a creep fit needs a non-zero step and at least 4 valid samples after it")
-    t, y = t[good], y[good]
-    grid = np.array([0.1]) if t0_grid is None else np.atleast_1d(np.asarray(t0_grid, float))
-    best = None
-    for t0 in grid:
-        x = step * np.log10(1.0 + t / t0)
-        A = np.column_stack([np.ones_like(x), x])
-        coef, *_ = np.linalg.lstsq(A, y, rcond=None)
-        cost = float(np.sum((A @ coef - y) ** 2))
-        if best is None or cost < best[0]:
-            best = (cost, float(t0), float(coef[1]))
-    return CreepModel(max(best[2], 0.0), best[1])
-
-
-def characterise_creep(microscope, axis, roi, *, model, step_px: float, n_frames: int = 40,
-                       tracker=None) -> tuple[CreepModel, pd.DataFrame]:
-    """Measure creep: one open-loop feed-forward step of ``step_px``, held for ``n_frames`` frames.
-
-    The step is made through ``model`` (its memory is updated). Returns the fitted
-    :class:`CreepModel` and the hold as a DataFrame ``frame, t, u, x, y, ok, displacement``.
-    """
-    from semlab.control import _default_tracker, _read_result, _roi_centre
-
-    model.check_axis(axis)
-    # the default tracker's window is widened to hold the step (a 300-px window loses a 100-px jump)
-    tracker = _default_tracker(tracker, jump_px=abs(float(step_px)), roi=roi)
-    d = np.asarray(model.direction)
-    p0 = np.array(_roi_centre(roi))
-    frame = microscope.grab()
-    tracker.init(frame, tuple(roi))
-    y_before = model.state.y
-    u = model.inverse(y_before + float(step_px))
-    axis.apply(u)
-    dy = model.forward(u) - y_before
-    T = float(microscope.frame_period)
-    rows = []
-    for k in range(1, int(n_frames) + 1):
-        x, y, _, ok = _read_result(tracker.update(microscope.grab()))
-        ok = ok and math.isfinite(x) and math.isfinite(y)
-        disp = float((np.array([x, y]) - p0) @ d) if ok else float("nan")
-        rows.append((k, (k - 0.5) * T, u, x, y, ok, disp))
-    df = pd.DataFrame(rows, columns=["frame", "t", "u", "x", "y", "ok", "displacement"])
-    return fit_creep(df["t"], df["displacement"], dy), df
+        return getattr(importlib.import_module(f"{__package__}.{_MOVED[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

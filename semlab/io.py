@@ -56,6 +56,8 @@ import numpy as np
 
 __all__ = [
     "IMAGE_SUFFIXES",
+    "ORDERS",
+    "PIXEL_SIZE_HINT",
     "VIDEO_SUFFIXES",
     "FrameReadError",
     "FrameSequence",
@@ -63,6 +65,7 @@ __all__ = [
     "expand_inputs",
     "list_samples",
     "load_sample",
+    "natural_order",
     "natural_sort_key",
     "read_frames",
     "read_image",
@@ -79,6 +82,13 @@ VIDEO_SUFFIXES = (".avi", ".mp4", ".mov", ".mkv", ".m4v", ".mpg", ".mpeg", ".wmv
 SUPPORTED_SUFFIXES = IMAGE_SUFFIXES + VIDEO_SUFFIXES
 
 _BT601 = np.array([0.299, 0.587, 0.114])
+
+#: How :func:`read_frames` orders its files: ``"natural"`` sorts them all (``frame_2`` before ``frame_10``),
+#: ``"given"`` keeps a list as given (folders and patterns still contribute their files in natural order).
+ORDERS = ("natural", "given")
+
+#: The hint an unknown pixel size carries; the command line swaps it for the flag its user types.
+PIXEL_SIZE_HINT = "pass pixel_size_nm"
 
 
 class FrameReadError(ValueError):
@@ -200,18 +210,39 @@ def _folder_files(folder: Path) -> list[Path]:
     return sorted(files, key=lambda p: natural_sort_key(p.name))
 
 
-def expand_inputs(inputs: PathLike | Iterable[PathLike]) -> list[Path]:
+def natural_order(paths: Iterable[PathLike]) -> list[Path]:
+    """``paths`` sorted by :func:`natural_sort_key` of their full path (stable for equal keys).
+
+    A shell expands ``frame_*.png`` in character order (``frame_0, frame_1, frame_10, frame_2``); this puts
+    ``frame_2`` before ``frame_10``, and files of one folder together.
+    """
+    return sorted((Path(p) for p in paths), key=natural_sort_key)
+
+
+def expand_inputs(inputs: PathLike | Iterable[PathLike], *, order: str = "natural") -> list[Path]:
     """Turn a path, a folder, a glob pattern or a list of these into an ordered list of files.
 
     Folders contribute their supported image/video files in natural order (hidden files and other
     files such as LICENSE or README are skipped); glob patterns their matches in natural order;
-    files themselves. The order of a list is kept.
+    files themselves.
+
+    Parameters
+    ----------
+    inputs : str, path-like, or list of them
+    order : {"natural", "given"}
+        ``"natural"`` (default) sorts all the files naturally (:func:`natural_order`), so a list that a
+        shell expanded as ``0, 1, 10, 2`` is read as ``0, 1, 2, ..., 10``; ``"given"`` keeps the order of
+        the list.
 
     Raises
     ------
     FrameReadError
         For a missing file, an empty folder, a pattern that matches nothing, an unsupported format.
+    ValueError
+        An unknown ``order``.
     """
+    if order not in ORDERS:
+        raise ValueError(f"order must be one of {ORDERS}, got {order!r}")
     if isinstance(inputs, (str, os.PathLike)):
         items = [inputs]
     else:
@@ -242,7 +273,7 @@ def expand_inputs(inputs: PathLike | Iterable[PathLike]) -> list[Path]:
             out.extend(sorted(matches, key=natural_sort_key))
         else:
             raise FrameReadError(p, "no such file or folder")
-    return out
+    return natural_order(out) if order == "natural" else out
 
 
 def _check_suffix(p: Path) -> None:
@@ -653,20 +684,24 @@ def read_frames(
     *,
     pixel_size_nm: float | None = None,
     progress: bool = False,
+    order: str = "natural",
 ) -> FrameSequence:
-    """Read a recording: files, a folder, a glob pattern or a list of these, in order.
+    """Read a recording: files, a folder, a glob pattern or a list of these, in natural order.
 
     Parameters
     ----------
     inputs : str, path-like, or list of them
         A file (PNG/JPEG/BMP/TIFF, multi-page TIFF, video ``.avi``/``.mp4``/...), a folder (its image and
-        video files in natural order: ``frame_2`` before ``frame_10``; other files are ignored), a glob
-        pattern such as ``"run/frame_*.png"`` (natural order), or a list of any of these (kept in the
-        order given).
+        video files; other files are ignored), a glob pattern such as ``"run/frame_*.png"``, or a list of
+        any of these. The files are read in natural order (``frame_2`` before ``frame_10``), whatever
+        order a list gives them in (a shell expands ``frame_*.png`` as ``frame_0, frame_1, frame_10,
+        frame_2``); ``meta["reordered"]`` says whether that changed the order given.
     pixel_size_nm : float, optional
         Pixel size in nm; overrides whatever the metadata says.
     progress : bool
         Show a ``tqdm`` progress bar over the files.
+    order : {"natural", "given"}
+        ``"given"`` keeps a list in the order given (see :func:`expand_inputs`).
 
     Returns
     -------
@@ -674,7 +709,8 @@ def read_frames(
         ``.frames`` (N, H, W), ``.paths``, ``.pixel_size_nm`` (None when unknown), ``.pixel_size_source``
         and ``.meta``. The pixel size of a sequence is that of its first file; when later files disagree
         by more than 0.1 % a :class:`UserWarning` is issued (all values are in
-        ``meta["pixel_size_nm_per_file"]``).
+        ``meta["pixel_size_nm_per_file"]``). ``meta["reordered"]`` is True when natural order changed
+        the order of the files given, and ``meta["given_order"]`` then lists them as given.
 
     Raises
     ------
@@ -686,13 +722,14 @@ def read_frames(
 
     Examples
     --------
-    >>> seq = read_frames("data/real-sem/contact_brightness_seq/liftout_contact_brightness_*_ib.png")
+    >>> seq = read_frames("data/real-sem/contact_brightness_seq/")
     ... # doctest: +SKIP
     >>> seq.frames.shape  # doctest: +SKIP
     (11, 717, 1075)
     """
     override = None if pixel_size_nm is None else _check_pixel_size(pixel_size_nm)
-    files = expand_inputs(inputs)
+    given = expand_inputs(inputs, order="given")
+    files = natural_order(given) if order == "natural" else given
     it: Iterable[Path] = files
     if progress and len(files) > 1:
         from tqdm.auto import tqdm
@@ -746,7 +783,10 @@ def read_frames(
         "pixel_size_nm_per_file": per_file_ps,
         "metadata_pixel_size_nm": meta_ps,
         "metadata_pixel_size_source": first_info["pixel_size_source"],
+        "reordered": files != given,
     }
+    if meta["reordered"]:
+        meta["given_order"] = [str(p) for p in given]
     for key in ("vendor", "fei_metadata", "sem_metadata", "fps", "converted"):
         if key in first_info:
             meta[key] = first_info[key]
@@ -757,7 +797,7 @@ def read_frames(
     else:
         ps, src = (
             None,
-            f"unknown: {first_info['pixel_size_source']} ({first_path.name}); pass pixel_size_nm",
+            f"unknown: {first_info['pixel_size_source']} ({first_path.name}); {PIXEL_SIZE_HINT}",
         )
     return FrameSequence(
         frames=frames, paths=paths, pixel_size_nm=ps, pixel_size_source=src, meta=meta
@@ -801,8 +841,8 @@ _REAL_SAMPLES = {
         ),
     ),
     "contact_brightness_reference": (
-        "real-sem/contact_brightness_seq/needle_liftout_land_ib.png",
-        "the reference frame taken before the first move of contact_brightness_seq",
+        "real-sem/contact_brightness_reference/needle_liftout_land_ib.png",
+        "the reference frame taken before the first move of contact_brightness_seq (not one of its frames)",
     ),
     "charge_neutralisation_seq": (
         "real-sem/charge_neutralisation_seq/*_charge_neutralisation_*_eb.png",

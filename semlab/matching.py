@@ -17,7 +17,8 @@ import numpy as np
 
 from .subpixel import five_point_gradients
 
-__all__ = ["contour_match", "hager_belhumeur_increment", "offline_matrix", "parabola_peak", "ssd_match"]
+__all__ = ["contour_match", "hager_belhumeur_increment", "hager_belhumeur_solver", "hager_belhumeur_step", "offline_matrix",
+           "parabola_peak", "ssd_match"]
 
 
 def parabola_peak(scores: np.ndarray, ix: int, iy: int) -> tuple[float, float]:
@@ -101,6 +102,28 @@ def offline_matrix(template, mask=None) -> np.ndarray:
     return np.stack([ix[use], iy[use]], axis=1).astype(np.float64)
 
 
+def hager_belhumeur_solver(m0) -> np.ndarray:
+    """``(M₀ᵀM₀)⁻¹M₀ᵀ``: the constant matrix of the increment (eq. 5), computed once per template.
+
+    Parameters
+    ----------
+    m0 : (K, 2) ndarray
+        :func:`offline_matrix`.
+
+    Returns
+    -------
+    (2, K) ndarray
+    """
+    m0 = np.asarray(m0, np.float64)
+    return np.linalg.inv(m0.T @ m0) @ m0.T
+
+
+def hager_belhumeur_step(solver, warped, template) -> np.ndarray:
+    """``Δμ = −(M₀ᵀM₀)⁻¹M₀ᵀ[I(f(R; μ), tₙ) − I(R, t₀)]`` from :func:`hager_belhumeur_solver` and the
+    pixels R of the warped frame and of the template, as (K,) vectors (eqs. 3-5)."""
+    return -solver @ (np.asarray(warped, np.float64) - np.asarray(template, np.float64))
+
+
 def hager_belhumeur_increment(template, warped, m0=None, mask=None) -> np.ndarray:
     """The parametric SSD increment ``Δμ = −(M₀ᵀM₀)⁻¹ M₀ᵀ [I(f(R; μ), tₙ) − I(R, t₀)]`` (eqs. 2-5).
 
@@ -120,7 +143,8 @@ def hager_belhumeur_increment(template, warped, m0=None, mask=None) -> np.ndarra
     (2,) ndarray
         ``Δμ = (Δu, Δv)``; the new estimate is ``μ + Δμ``. Linearising
         ``I(f(x; μ + Δμ), tₙ) ≈ I(f(x; μ), tₙ) + M₀ Δμ`` with the template's gradients standing in
-        for the image's is what makes ``M₀`` constant, computed once offline.
+        for the image's is what makes ``M₀`` constant, computed once offline: a tracker keeps
+        :func:`hager_belhumeur_solver` and calls :func:`hager_belhumeur_step` per iteration.
     """
     t = np.asarray(template, np.float64)
     i = np.asarray(warped, np.float64)
@@ -129,5 +153,4 @@ def hager_belhumeur_increment(template, warped, m0=None, mask=None) -> np.ndarra
     use = np.ones(t.shape, bool) if mask is None else np.asarray(mask, bool)
     if m0 is None:
         m0 = offline_matrix(t, use)
-    diff = (i - t)[use]
-    return -np.linalg.solve(m0.T @ m0, m0.T @ diff)
+    return hager_belhumeur_step(hager_belhumeur_solver(m0), i[use], t[use])

@@ -29,6 +29,8 @@ import time
 import numpy as np
 import pandas as pd
 
+from .roi import roi_centre
+
 __all__ = ["LOSS_PX", "run_tracker", "summarise_errors", "summarize_errors", "tracking_errors"]
 
 #: An error above this many px counts as a lost target (the issue's loss criterion).
@@ -66,8 +68,7 @@ def tracking_errors(result: pd.DataFrame, truth: pd.DataFrame, roi) -> pd.DataFr
     if len(missing):
         raise ValueError(f"no ground truth for frames {list(missing[:5])}")
     tru = tru.loc[res.index]
-    cx = roi[0] + (roi[2] - 1) / 2.0
-    cy = roi[1] + (roi[3] - 1) / 2.0
+    cx, cy = roi_centre(roi)
     x0, y0 = float(tru.loc[0, "x"]), float(tru.loc[0, "y"])
     ex = (res["x"].to_numpy(float) - cx) - (tru["x"].to_numpy(float) - x0)
     ey = (res["y"].to_numpy(float) - cy) - (tru["y"].to_numpy(float) - y0)
@@ -77,33 +78,8 @@ def tracking_errors(result: pd.DataFrame, truth: pd.DataFrame, roi) -> pd.DataFr
                          "ok": ok, "visible": visible})
 
 
-def summarize_errors(errors: pd.DataFrame, crb=None, *, loss_px: float = LOSS_PX) -> dict:
-    """RMSE, standard deviation, mean error and loss rate of :func:`tracking_errors`' output.
-
-    Parameters
-    ----------
-    errors : pandas.DataFrame
-        From :func:`tracking_errors`.
-    crb : (float, float) or None
-        The Cramér–Rao bound ``(σx, σy)`` px of the sequence (``seq.crb``).
-    loss_px : float
-        Error above which a frame counts as lost.
-
-    Returns
-    -------
-    dict
-        ``n, rmse, rmse_x, rmse_y, std, std_x, std_y, mean_error, max_error, loss_rate,
-        flagged_rate`` and, with ``crb``, ``crb, crb_x, crb_y, rmse_over_crb, std_over_crb``.
-        ``flagged_rate`` is the fraction of frames with ``ok=False`` (whatever the error).
-
-    Examples
-    --------
-    >>> import pandas as pd
-    >>> e = pd.DataFrame({"frame": [0, 1, 2], "ex": [0.0, 0.3, -0.1], "ey": [0.0, 0.0, 0.0],
-    ...                   "error": [0.0, 0.3, 0.1], "ok": True, "visible": True})
-    >>> round(summarize_errors(e)["rmse"], 4)
-    0.2236
-    """
+def _error_statistics(errors: pd.DataFrame, crb, loss_px: float) -> tuple[dict, tuple[float, float]]:
+    """The statistics of :func:`summarize_errors`, and the mean error's components ``(x, y)``."""
     e = errors[(errors["frame"] != 0) & errors["visible"].astype(bool)]
     n = len(e)
     have = e[np.isfinite(e["ex"]) & np.isfinite(e["ey"])]
@@ -134,11 +110,43 @@ def summarize_errors(errors: pd.DataFrame, crb=None, *, loss_px: float = LOSS_PX
         sx, sy = (float(v) for v in crb)
         c = math.hypot(sx, sy)
         out.update(crb=c, crb_x=sx, crb_y=sy, rmse_over_crb=out["rmse"] / c, std_over_crb=out["std"] / c)
-    return out
+    means = (float(np.mean(ex)), float(np.mean(ey))) if ex.size else (nan, nan)
+    return out, means
+
+
+def summarize_errors(errors: pd.DataFrame, crb=None, *, loss_px: float = LOSS_PX) -> dict:
+    """RMSE, standard deviation, mean error and loss rate of :func:`tracking_errors`' output.
+
+    Parameters
+    ----------
+    errors : pandas.DataFrame
+        From :func:`tracking_errors`.
+    crb : (float, float) or None
+        The Cramér–Rao bound ``(σx, σy)`` px of the sequence (``seq.crb``).
+    loss_px : float
+        Error above which a frame counts as lost.
+
+    Returns
+    -------
+    dict
+        ``n, rmse, rmse_x, rmse_y, std, std_x, std_y, mean_error, max_error, loss_rate,
+        flagged_rate`` and, with ``crb``, ``crb, crb_x, crb_y, rmse_over_crb, std_over_crb``.
+        ``flagged_rate`` is the fraction of frames with ``ok=False`` (whatever the error).
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> e = pd.DataFrame({"frame": [0, 1, 2], "ex": [0.0, 0.3, -0.1], "ey": [0.0, 0.0, 0.0],
+    ...                   "error": [0.0, 0.3, 0.1], "ok": True, "visible": True})
+    >>> round(summarize_errors(e)["rmse"], 4)
+    0.2236
+    """
+    return _error_statistics(errors, crb, loss_px)[0]
 
 
 def summarise_errors(errors: pd.DataFrame, crb=None, *, loss_px: float = LOSS_PX) -> dict:
-    """:func:`summarize_errors` with every length suffixed ``_px`` (the benchmark tables' columns).
+    """:func:`summarize_errors` with every length suffixed ``_px`` (the benchmark tables' columns),
+    and the mean error's components.
 
     Returns
     -------
@@ -146,16 +154,12 @@ def summarise_errors(errors: pd.DataFrame, crb=None, *, loss_px: float = LOSS_PX
         ``n, rmse_px, rmse_x_px, rmse_y_px, std_px, std_x_px, std_y_px, mean_err_px,
         mean_err_x_px, mean_err_y_px, max_err_px, loss_rate, flagged_rate`` (and the CRB entries).
     """
-    s = summarize_errors(errors, crb, loss_px=loss_px)
-    e = errors[(errors["frame"] != 0) & errors["visible"].astype(bool)]
-    ex, ey = e["ex"].to_numpy(float), e["ey"].to_numpy(float)
-    have = np.isfinite(ex) & np.isfinite(ey)
+    s, (mean_x, mean_y) = _error_statistics(errors, crb, loss_px)
     out = {"n": s["n"]}
     for k in ("rmse", "rmse_x", "rmse_y", "std", "std_x", "std_y"):
         out[f"{k}_px"] = s[k]
     out["mean_err_px"] = s["mean_error"]
-    out["mean_err_x_px"] = float(np.mean(ex[have])) if have.any() else float("nan")
-    out["mean_err_y_px"] = float(np.mean(ey[have])) if have.any() else float("nan")
+    out["mean_err_x_px"], out["mean_err_y_px"] = mean_x, mean_y
     out["max_err_px"] = s["max_error"]
     out["loss_rate"] = s["loss_rate"]
     out["flagged_rate"] = s["flagged_rate"]
@@ -170,8 +174,9 @@ def run_tracker(tracker, frames, roi) -> tuple[pd.DataFrame, float]:
 
     Parameters
     ----------
-    tracker : object with ``init(frame, roi)`` and ``update(frame)``
-        e.g. :class:`semlab.tracking.Tracker` or a :mod:`semlab.peers` tracker.
+    tracker : VisualTracker
+        e.g. :class:`semlab.tracking.Tracker` or a :mod:`semlab.peers` tracker (``update`` returns a
+        :class:`~semlab.tracking.TrackResult`); the frame loop is :func:`semlab.tracking.track`'s.
     frames : (N, H, W) ndarray or sequence of (H, W) arrays
     roi : (x, y, w, h)
 
@@ -183,18 +188,17 @@ def run_tracker(tracker, frames, roi) -> tuple[pd.DataFrame, float]:
         the ROI), every row is ``ok=False`` with NaN position, the reason is kept in
         ``df.attrs["init_error"]`` and the time is NaN: in a sweep a refusal counts as a loss.
     """
+    from .tracking.run import follow_frames, start_trackers
+
     try:
-        first = tracker.init(frames[0], roi)
+        rows = start_trackers([tracker], frames[0], [roi])
     except ValueError as err:
         nan = float("nan")
         df = pd.DataFrame([(i, nan, nan, 0.0, False) for i in range(len(frames))],
                           columns=["frame", "x", "y", "score", "ok"])
         df.attrs["init_error"] = str(err)
         return df, nan
-    rows = [(0, first.x, first.y, first.score, first.ok)]
     t0 = time.perf_counter()
-    for i in range(1, len(frames)):
-        r = tracker.update(frames[i])
-        rows.append((i, r.x, r.y, r.score, r.ok))
+    rows += follow_frames([tracker], (frames[i] for i in range(1, len(frames))))
     ms = (time.perf_counter() - t0) * 1e3 / max(len(frames) - 1, 1)
-    return pd.DataFrame(rows, columns=["frame", "x", "y", "score", "ok"]), ms
+    return pd.DataFrame([(i, r.x, r.y, r.score, r.ok) for i, _, r in rows], columns=["frame", "x", "y", "score", "ok"]), ms

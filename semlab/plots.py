@@ -16,13 +16,17 @@ import io
 import numpy as np
 
 __all__ = [
+    "OUTLIER_FENCE",
     "add_nm_axes",
     "error_histogram",
     "figure_png",
+    "mark_missing",
+    "outlier_fences",
     "plot_hysteresis",
     "plot_step_response",
     "plot_track",
     "plot_track_xy",
+    "robust_ylim",
     "show_edges",
     "show_frame",
     "template_steps",
@@ -35,6 +39,144 @@ def _ax(ax):
 
         ax = plt.gca()
     return ax
+
+
+#: Tukey's "far out" fence: a value more than this many interquartile ranges beyond the quartiles is an
+#: outlier (Tukey 1977). 3 rather than the usual 1.5 keeps a skewed but genuine spread on the axes.
+OUTLIER_FENCE = 3.0
+
+
+def outlier_fences(values, *, k: float = OUTLIER_FENCE, log: bool = False) -> tuple[float, float]:
+    """Tukey's fences ``(Q1 - k IQR, Q3 + k IQR)`` of the finite values (of their log10 when ``log``).
+
+    Returns the fences in the values' own units; ``(nan, nan)`` without finite (positive, for ``log``)
+    values.
+    """
+    v = np.asarray(values, float).ravel()
+    v = v[np.isfinite(v) & (v > 0)] if log else v[np.isfinite(v)]
+    if v.size == 0:
+        return float("nan"), float("nan")
+    if log:
+        v = np.log10(v)
+    q1, q3 = np.percentile(v, [25, 75])
+    lo, hi = q1 - k * (q3 - q1), q3 + k * (q3 - q1)
+    return (float(10**lo), float(10**hi)) if log else (float(lo), float(hi))
+
+
+def _xy(line):
+    """A line's x, y as floats (categorical x, e.g. level names, as the positions matplotlib gave them)."""
+    xy = np.asarray(line.get_xydata(), float).reshape(-1, 2)
+    return xy[:, 0], xy[:, 1]
+
+
+def _line_data(ax):
+    """x, y of every data line on ``ax`` (not the marker lines the helpers below add)."""
+    for line in ax.get_lines():
+        if line.get_gid() in ("semlab-outlier", "semlab-missing"):
+            continue
+        x, y = _xy(line)
+        if x.size:
+            yield line, x, y
+
+
+def robust_ylim(ax=None, *, k: float = OUTLIER_FENCE, pad: float = 0.08, include=(), unit: str = "",
+                max_labels: int = 6):
+    """Y limits from the lines' inliers, with every outlier marked at the edge it lies beyond.
+
+    A few wild values (a tracker that jumped 300 px) would otherwise stretch the axis until the others
+    are flat. The limits span the values inside :func:`outlier_fences` of all lines on ``ax`` (and
+    ``include``, e.g. a reference level that must stay visible), padded by ``pad`` of the span; each
+    value beyond them is drawn as a triangle on that edge, in its line's colour, labelled with its value.
+
+    Parameters
+    ----------
+    ax : matplotlib Axes, optional
+    k : float
+        Fence in interquartile ranges (:data:`OUTLIER_FENCE`).
+    pad : float
+        Margin, as a fraction of the inliers' span (of decades on a log axis).
+    include : sequence of float
+        Values the limits must contain.
+    unit : str
+        Appended to the outliers' labels.
+    max_labels : int
+        Per line, only the ``max_labels`` values farthest out are labelled (every outlier gets its marker).
+
+    Returns
+    -------
+    dict
+        ``limits`` (lo, hi), ``outliers`` (list of (x, y) beyond them), ``markers`` (the artists).
+    """
+    ax = _ax(ax)
+    log = ax.get_yscale() == "log"
+    data = list(_line_data(ax))
+    ys = np.concatenate([y for _, _, y in data] + [np.asarray(include, float)]) if data else np.asarray(include, float)
+    f_lo, f_hi = outlier_fences(ys, k=k, log=log)
+    if not np.isfinite(f_lo):
+        return {"limits": ax.get_ylim(), "outliers": [], "markers": []}
+    keep = ys[np.isfinite(ys) & (ys >= f_lo) & (ys <= f_hi) & ((ys > 0) if log else True)]
+    keep = np.concatenate([keep, np.asarray(include, float)])
+    lo, hi = float(np.min(keep)), float(np.max(keep))
+    if log:
+        a, b = np.log10(lo), np.log10(hi)
+        m = pad * max(b - a, 0.3)
+        lo, hi = 10 ** (a - m), 10 ** (b + m)
+    else:
+        m = pad * max(hi - lo, 1e-9 + 0.05 * max(abs(lo), abs(hi), 1.0))
+        lo, hi = lo - m, hi + m
+    ax.set_ylim(lo, hi)
+    out = {"limits": (lo, hi), "outliers": [], "markers": []}
+    for line, x, y in data:
+        beyond = np.isfinite(y) & ((y < lo) | (y > hi))
+        if not beyond.any():
+            continue
+        xo, yo = x[beyond], y[beyond]
+        above = yo > hi
+        edges = np.where(above, hi, lo)
+        for mark, side in (("^", above), ("v", ~above)):
+            if side.any():
+                (marker,) = ax.plot(xo[side], edges[side], mark, color=line.get_color(), markersize=8,
+                                    linestyle="none", clip_on=False, gid="semlab-outlier", zorder=5)
+                out["markers"].append(marker)
+        distance = np.maximum(yo - hi, lo - yo)
+        for j in np.argsort(-distance)[:max_labels]:
+            out["markers"].append(ax.annotate(
+                f"{yo[j]:.3g}{unit}", (xo[j], edges[j]), textcoords="offset points",
+                xytext=(4, -10 if above[j] else 4), fontsize="x-small", color=line.get_color()))
+        out["outliers"] += [(float(a), float(b)) for a, b in zip(xo, yo)]
+    return out
+
+
+def mark_missing(ax=None, *, label: str = "no value", lines=None):
+    """Mark the points a line has no value at (NaN) with a cross on the bottom edge, in the line's colour.
+
+    matplotlib silently leaves NaN out of a line: a tracker that lost every frame at one dose simply
+    vanishes from a sweep. Each NaN point of ``lines`` (default: every data line on ``ax``) is drawn as
+    an ``x`` at the bottom of the axes, at its own x, and the first one carries ``label`` in the legend.
+
+    Returns
+    -------
+    dict
+        ``missing`` (list of (line label, x)) and ``markers``.
+    """
+    ax = _ax(ax)
+    import matplotlib.transforms as mtransforms
+
+    trans = mtransforms.blended_transform_factory(ax.transData, ax.transAxes)
+    out = {"missing": [], "markers": []}
+    chosen = list(_line_data(ax)) if lines is None else [(ln, *_xy(ln)) for ln in lines]
+    first = True
+    for line, x, y in chosen:
+        gone = np.isfinite(x) & ~np.isfinite(y)
+        if not gone.any():
+            continue
+        (marker,) = ax.plot(x[gone], np.full(gone.sum(), 0.03), "x", color=line.get_color(), markersize=9,
+                            markeredgewidth=2, transform=trans, clip_on=False, gid="semlab-missing",
+                            label=label if first else None, zorder=5)
+        first = False
+        out["missing"] += [(line.get_label(), float(v)) for v in x[gone]]
+        out["markers"].append(marker)
+    return out
 
 
 def _extent(shape, origin=(0, 0)):

@@ -27,7 +27,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from semlab.control import AxisLoop, _default_tracker, _roi_centre, check_in_frame, tracked_position
+from semlab.control import AxisLoop, check_in_frame, tracked_position
+from semlab.measure import default_tracker, start_point
 
 __all__ = ["POINT_COLUMNS", "PointServo", "ProbeMove", "image_jacobian", "move_probe_to", "move_probes_to",
            "point_metrics"]
@@ -141,7 +142,7 @@ class PointServo:
             A NaN target, or a move some axis cannot make within its limits.
         """
         self.roi = tuple(roi)
-        self.p0 = np.array(_roi_centre(roi))
+        self.p0 = np.array(start_point(roi))
         self.target = _target_point(target_xy)
         self.goals = self.J_inv @ (self.target - self.p0)
         for i, (loop, goal) in enumerate(zip(self.loops, self.goals)):
@@ -158,7 +159,7 @@ class PointServo:
         command (:meth:`plan` first; the target is checked against the frame before anything moves)."""
         self.check_frame(frame)
         jump = float(np.hypot(*(self.target - self.p0)))
-        self.tracker = _default_tracker(self._tracker, jump_px=jump, roi=self.roi)
+        self.tracker = default_tracker(self._tracker, jump_px=jump, roi=self.roi)
         self.tracker.init(frame, self.roi)
         self.frame = 0
         self.s_meas = np.zeros(self.n_axes)

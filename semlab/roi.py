@@ -8,11 +8,13 @@ deep inside OpenCV.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import cv2
 import numpy as np
 
-__all__ = ["as_gray_float", "check_roi", "clip_window", "motion_energy", "roi_centre", "roi_from_click",
-           "roi_from_motion"]
+__all__ = ["MotionROI", "as_gray_float", "check_roi", "clip_window", "find_motion_roi", "motion_energy",
+           "roi_centre", "roi_from_click", "roi_from_motion"]
 
 
 def as_gray_float(frame, *, name: str = "frame") -> np.ndarray:
@@ -147,7 +149,33 @@ def motion_energy(frames, *, sigma: float = 3.0) -> np.ndarray:
     return cv2.GaussianBlur(energy, (0, 0), sigma) if sigma > 0 else energy
 
 
+class MotionROI(NamedTuple):
+    """An ROI found by motion differencing, and the frame it belongs to.
+
+    Attributes
+    ----------
+    roi : (x, y, w, h)
+        Around the tip as it is in frame ``frame_index``: the probe has moved between the frames, so
+        the ROI holds the tip in that frame only.
+    frame_index : int
+        Index, in the frames given, of the frame the ROI was found on (the last frame used).
+    """
+
+    roi: tuple[int, int, int, int]
+    frame_index: int
+
+
 def roi_from_motion(frames, size=200, *, sigma: float = 3.0, max_frames: int = 10) -> tuple[int, int, int, int]:
+    """ROI around the tip of the moving probe in the last frame used (paper, step 1).
+
+    The ROI belongs to ``frames[min(len(frames), max_frames) - 1]``: apply it to that frame, not to the
+    first one, where the tip was elsewhere. :func:`find_motion_roi` returns the ROI with that index; this
+    function returns the ROI alone (parameters, errors: as there).
+    """
+    return find_motion_roi(frames, size, sigma=sigma, max_frames=max_frames).roi
+
+
+def find_motion_roi(frames, size=200, *, sigma: float = 3.0, max_frames: int = 10) -> MotionROI:
     """ROI around the tip of the moving probe, found by background subtraction (paper, step 1).
 
     The probe is stepped along x or y at a constant step while frames are grabbed; the
@@ -171,7 +199,9 @@ def roi_from_motion(frames, size=200, *, sigma: float = 3.0, max_frames: int = 1
 
     Returns
     -------
-    (x, y, w, h)
+    MotionROI
+        ``roi`` (x, y, w, h) around the tip in the last frame used, and that frame's index
+        ``frame_index``.
 
     Raises
     ------
@@ -203,4 +233,4 @@ def roi_from_motion(frames, size=200, *, sigma: float = 3.0, max_frames: int = 1
         wts = change[ys, xs]
         cx, cy = float(xs @ wts / wts.sum()), float(ys @ wts / wts.sum())
     w, h = _size(size)
-    return clip_window(cx, cy, w, h, change.shape)
+    return MotionROI(clip_window(cx, cy, w, h, change.shape), len(stack) - 1)

@@ -27,6 +27,8 @@ __all__ = [
     "gauss_newton_setup",
     "gauss_newton_translation",
     "gradient_subpixel_shift",
+    "keys_shift_filter",
+    "keys_weights",
     "sample_bicubic",
     "sample_shifted",
     "sample_shifted_filtered",
@@ -36,6 +38,22 @@ __all__ = [
 
 #: The paper's derivative mask (eq. 8): truncation error O(h⁴).
 FIVE_POINT_KERNEL = np.array([1.0, -8.0, 0.0, 8.0, -1.0], np.float32) / 12.0
+
+#: Robust standard deviation from the median absolute deviation (Gaussian noise).
+MAD_TO_SD = 1.4826
+#: Tukey's biweight constant in robust spreads (95 % efficient for Gaussian noise), and the step
+#: (px) below which ``tukey=True`` switches to it.
+TUKEY_C = 4.685
+TUKEY_FROM_STEP_PX = 0.05
+#: A step that reverses more than this fraction of a previous one longer than 0.1 px (squared:
+#: 0.01) halves the steps from then on, down to an eighth.
+OVERSHOOT_REVERSAL = 0.25
+OVERSHOOT_MIN_STEP_SQ = 0.01
+MIN_DAMPING = 0.125
+#: ``early_stop``: the steps must shrink by at least this factor for the extrapolation to hold.
+EARLY_STOP_RATIO = 0.6
+#: A gain below this is no image of the template: the iteration stops.
+MIN_GAIN = 1e-6
 
 
 def five_point_gradients(image) -> tuple[np.ndarray, np.ndarray]:
@@ -89,13 +107,34 @@ def gradient_subpixel_shift(template, target, mask=None) -> tuple[float, float]:
     return float(dx), float(dy)
 
 
-def _keys_weights(t):
-    """Keys' cubic convolution weights (a = −0.5) for fractional offsets ``t`` in [0, 1): (4, K)."""
+def keys_weights(t) -> np.ndarray:
+    """Keys' cubic convolution weights (a = −0.5) for fractional offsets ``t`` in [0, 1).
+
+    Returns
+    -------
+    ndarray of float64
+        ``(4,)`` for one offset, ``(4, K)`` for ``K`` offsets: the weights of the samples at
+        ``−1, 0, 1, 2`` px from the offset's integer part.
+    """
+    # One offset on Python floats (the per-iteration hot path: numpy scalars cost ten times more).
+    t = float(t) if np.ndim(t) == 0 else np.asarray(t, np.float64)
     t2, t3 = t * t, t * t * t
-    return np.stack([-0.5 * t3 + t2 - 0.5 * t,
+    return np.array([-0.5 * t3 + t2 - 0.5 * t,
                      1.5 * t3 - 2.5 * t2 + 1.0,
                      -1.5 * t3 + 2.0 * t2 + 0.5 * t,
                      0.5 * t3 - 0.5 * t2])
+
+
+def keys_shift_filter(image, frac_x: float, frac_y: float) -> np.ndarray:
+    """``image`` sampled at ``(x + frac_x, y + frac_y)`` at every pixel, by Keys' cubic kernel.
+
+    One separable 4×4 filter, ``out(x, y) = Σᵢⱼ wx[i]·wy[j]·img(x − 1 + i, y − 1 + j)`` (a
+    correlation anchored at tap 1), border replicated: a gather from it samples the image at any
+    set of points that share one fractional shift (the band moved by a translation).
+    """
+    wx, wy = keys_weights(frac_x).astype(np.float32), keys_weights(frac_y).astype(np.float32)
+    return cv2.sepFilter2D(np.asarray(image, np.float32), -1, wx.reshape(1, 4), wy.reshape(4, 1), anchor=(1, 1),
+                           borderType=cv2.BORDER_REPLICATE)
 
 
 def sample_bicubic(image, xs, ys) -> np.ndarray:
@@ -108,7 +147,7 @@ def sample_bicubic(image, xs, ys) -> np.ndarray:
     xs = np.asarray(xs, np.float64).ravel()
     ys = np.asarray(ys, np.float64).ravel()
     x0, y0 = np.floor(xs), np.floor(ys)
-    wx, wy = _keys_weights(xs - x0), _keys_weights(ys - y0)
+    wx, wy = keys_weights(xs - x0), keys_weights(ys - y0)
     rows, cols = img.shape
     ix = np.clip(x0.astype(np.intp)[None, :] + np.arange(-1, 3)[:, None], 0, cols - 1)
     iy = np.clip(y0.astype(np.intp)[None, :] + np.arange(-1, 3)[:, None], 0, rows - 1)
@@ -121,14 +160,6 @@ def sample_bicubic(image, xs, ys) -> np.ndarray:
     return out
 
 
-def _keys_taps(frac: float) -> np.ndarray:
-    """Keys' four cubic weights (a = −0.5) for one fractional offset in [0, 1)."""
-    t = float(frac)
-    t2, t3 = t * t, t * t * t
-    return np.array([-0.5 * t3 + t2 - 0.5 * t, 1.5 * t3 - 2.5 * t2 + 1.0,
-                     -1.5 * t3 + 2.0 * t2 + 0.5 * t, 0.5 * t3 - 0.5 * t2], np.float32)
-
-
 def sample_shifted_filtered(image, points, shift) -> np.ndarray:
     """As :func:`sample_shifted`, by one separable 4×4 Keys filter over the image and a gather.
 
@@ -137,16 +168,14 @@ def sample_shifted_filtered(image, points, shift) -> np.ndarray:
     """
     img = np.asarray(image, np.float32)
     fx, fy = np.floor(shift[0]), np.floor(shift[1])
-    wx, wy = _keys_taps(shift[0] - fx), _keys_taps(shift[1] - fy)
-    # out(x, y) = Σᵢⱼ wx[i]·wy[j]·img(x − 1 + i, y − 1 + j): a correlation anchored at tap 1.
-    filtered = cv2.sepFilter2D(img, -1, wx.reshape(1, 4), wy.reshape(4, 1), anchor=(1, 1),
-                               borderType=cv2.BORDER_REPLICATE)
+    filtered = keys_shift_filter(img, shift[0] - fx, shift[1] - fy)
     rows, cols = img.shape
     px = points[:, 0].astype(np.intp) + int(fx)
     py = points[:, 1].astype(np.intp) + int(fy)
     if px.min() < 0 or py.min() < 0 or px.max() >= cols or py.max() >= rows:
-        px = np.clip(px, 0, cols - 1)
-        py = np.clip(py, 0, rows - 1)
+        # a point shifted off the image: clipping its index would read the interpolation at the
+        # border pixel + fraction, not the replicated border at the point's own position
+        return sample_bicubic(img, points[:, 0] + shift[0], points[:, 1] + shift[1])
     return filtered[py, px].astype(np.float64)
 
 
@@ -164,8 +193,7 @@ def sample_shifted(image, points, shift) -> np.ndarray:
     py = points[:, 1].astype(np.intp) + int(fy)
     if px.min() < 1 or py.min() < 1 or px.max() > cols - 3 or py.max() > rows - 3:
         return sample_bicubic(img, points[:, 0] + shift[0], points[:, 1] + shift[1])
-    wx = _keys_weights(np.array([shift[0] - fx]))[:, 0]
-    wy = _keys_weights(np.array([shift[1] - fy]))[:, 0]
+    wx, wy = keys_weights(shift[0] - fx), keys_weights(shift[1] - fy)
     flat = img.ravel()
     base = py * cols + px
     out = np.zeros(len(points), np.float64)
@@ -299,6 +327,19 @@ class GaussNewtonResult:
     converged : bool
     samples : (K,) ndarray
         The image at the position before the last (sub-tolerance) step.
+    normal_matrix : ndarray or None
+        The normal matrix of the last step: 2×2 (the translation's), or 4×4 with joint photometry
+        (translation, gain, offset); the Fisher information of the shift up to the noise scale.
+        None when no step was computed.
+    weighted_ssr : float
+        ``Σ prior·weights·r²`` of the last residuals ``r`` (those of ``samples``).
+    n_pixels : int
+        Template pixels in the fit.
+    weight_total : float
+        ``Σ weights``: the robust weights' total (``n_pixels`` when every pixel is an inlier).
+    robust_ssr : float
+        ``Σ prior·weights²·residual²``: the squared influence ``ψ(r)²`` of the residuals, which an
+        outlier bounds (Huber's M-estimator variance; ``weighted_ssr`` grows with its residual).
     """
 
     shift: np.ndarray
@@ -309,6 +350,11 @@ class GaussNewtonResult:
     iterations: int
     converged: bool
     samples: np.ndarray
+    normal_matrix: np.ndarray | None = None
+    weighted_ssr: float = float("nan")
+    n_pixels: int = 0
+    weight_total: float = float("nan")
+    robust_ssr: float = float("nan")
 
 
 def _remap_points(image, xs, ys):
@@ -486,102 +532,105 @@ def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=N
     -------
     GaussNewtonResult
     """
-    img = np.asarray(image, np.float32)
-    pts = np.asarray(points, np.float64)
-    if not exact or curvature is not None:
-        px, py = pts[:, 0].astype(np.float32), pts[:, 1].astype(np.float32)
-    p = np.array(shift0, np.float64)
-    start = p.copy()
-    g, o = float(gain0), float(offset0)
-    if setup is None or setup["key"] != (photometric, regions is None):
-        setup = gauss_newton_setup(values, gx, gy, weights=weights, regions=regions, photometric=photometric)
-    t, tx, ty, prior, sqrt_prior = (setup[k] for k in ("t", "tx", "ty", "prior", "sqrt_prior"))
-    joint = photometric and regions is None
-    two_level = photometric and regions is not None
-    if two_level:
-        inside, ind_in, ind_out, levels, regions2 = (setup[k] for k in ("inside", "ind_in", "ind_out", "levels",
-                                                                          "regions2"))
-    if not joint:
-        plain_hess, rhs_basis = setup["plain_hess"], setup["rhs_basis"]
-        absorbed_hess = setup.get("absorbed_hess")
+    return _GaussNewton(image, points, values, gx, gy, weights=weights, regions=regions, photometric=photometric,
+                        exact=exact, curvature=curvature, setup=setup, sectors=sectors).run(
+        shift0, gain0, offset0, max_iterations=max_iterations, tolerance=tolerance, huber=huber, tukey=tukey,
+        template_variance=template_variance, instrument=instrument, freeze=freeze, max_move=max_move,
+        early_stop=early_stop)
 
-    if sectors is not None:
-        sec = np.asarray(sectors, np.intp)
-        n_sec = int(sec.max()) + 1
-        sec = np.where(sec < 0, n_sec, sec)  # no local level: the extra bin, whose level stays 0
 
-    if exact:
-        # The crop is filtered once per iteration; the band's flat indices are fixed.
-        rows, cols = img.shape
-        ix0, iy0 = pts[:, 0].astype(np.intp), pts[:, 1].astype(np.intp)
-        flat_base = iy0 * cols + ix0
-        # (Column by column: numpy's axis-0 reductions of an (N, 2) array are several times slower.)
-        lo_x, hi_x, lo_y, hi_y = int(ix0.min()), int(ix0.max()), int(iy0.min()), int(iy0.max())
+class _GaussNewton:
+    """The iteration of :func:`gauss_newton_translation`: the template's constants, the sampler of
+    the image at the moved band, and the steps (photometry, residual, robust weights, normal
+    equations, solve), each a method; :meth:`run` is the loop."""
 
-    def sample(shift):
-        if not exact:
-            return _remap_points(img, px + np.float32(shift[0]), py + np.float32(shift[1]))
-        fx, fy = math.floor(shift[0]), math.floor(shift[1])
-        if not (lo_x + fx >= 0 and lo_y + fy >= 0 and hi_x + fx < cols and hi_y + fy < rows):
-            return sample_shifted_filtered(img, pts, shift)  # border replicated
-        wx, wy = _keys_taps(shift[0] - fx), _keys_taps(shift[1] - fy)
-        filtered = cv2.sepFilter2D(img, -1, wx.reshape(1, 4), wy.reshape(4, 1), anchor=(1, 1),
-                                   borderType=cv2.BORDER_REPLICATE)
-        return filtered.ravel().take(flat_base + (fy * cols + fx)).astype(np.float64)
-
-    converged = False
-    step = np.inf
-    robust = np.ones_like(t)
-    spread = None
-    block = None
-    prev, damping = None, 1.0
-    it = 0
-    samples = None
-    for it in range(1, max_iterations + 1):
-        samples = sample(p)
-        if two_level and step > freeze:
-            # Gain and offset follow the region means while the translation still moves, then
-            # stay fixed (the means move with p, a coupling Gauss–Newton does not model). The
-            # means are weighted by the robust weights, so occluders and clutter that fall into
-            # the band do not pull the levels.
-            swt_in, swt_out, swi, swo = (robust @ levels).tolist()
-            if swi <= 0 or swo <= 0:
-                break
-            ti, to = swt_in / swi, swt_out / swo
-            if ti == to:
-                break
-            si, so = ((robust * samples) @ regions2).tolist()
-            g = (si / swi - so / swo) / (ti - to)
-            o = so / swo - g * to
-            if abs(g) < 1e-6:
-                break
-        residual = samples - (g * t + o)
+    def __init__(self, image, points, values, gx, gy, *, weights, regions, photometric, exact, curvature, setup,
+                 sectors):
+        self.img = img = np.asarray(image, np.float32)
+        self.pts = pts = np.asarray(points, np.float64)
+        if not exact or curvature is not None:
+            self.px, self.py = pts[:, 0].astype(np.float32), pts[:, 1].astype(np.float32)
+        if setup is None or setup["key"] != (photometric, regions is None):
+            setup = gauss_newton_setup(values, gx, gy, weights=weights, regions=regions, photometric=photometric)
+        self.setup = setup
+        self.t, self.tx, self.ty, self.prior = (setup[k] for k in ("t", "tx", "ty", "prior"))
+        self.joint = photometric and regions is None
+        self.two_level = photometric and regions is not None
+        self.exact, self.curvature = exact, curvature
+        self.sec = None
         if sectors is not None:
+            sec = np.asarray(sectors, np.intp)
+            self.n_sec = int(sec.max()) + 1
+            self.sec = np.where(sec < 0, self.n_sec, sec)  # no local level: the extra bin, whose level stays 0
+        if exact:
+            # The crop is filtered once per iteration; the band's flat indices are fixed.
+            self.rows, self.cols = img.shape
+            ix0, iy0 = pts[:, 0].astype(np.intp), pts[:, 1].astype(np.intp)
+            self.flat_base = iy0 * self.cols + ix0
+            # (Column by column: numpy's axis-0 reductions of an (N, 2) array are several times slower.)
+            self.bounds = int(ix0.min()), int(ix0.max()), int(iy0.min()), int(iy0.max())
+
+    def sample(self, shift) -> np.ndarray:
+        """The image at the band's points moved by ``shift`` (Keys, or OpenCV's ``remap``)."""
+        if not self.exact:
+            return _remap_points(self.img, self.px + np.float32(shift[0]), self.py + np.float32(shift[1]))
+        fx, fy = math.floor(shift[0]), math.floor(shift[1])
+        lo_x, hi_x, lo_y, hi_y = self.bounds
+        if not (lo_x + fx >= 0 and lo_y + fy >= 0 and hi_x + fx < self.cols and hi_y + fy < self.rows):
+            return sample_shifted_filtered(self.img, self.pts, shift)  # border replicated
+        filtered = keys_shift_filter(self.img, shift[0] - fx, shift[1] - fy)
+        return filtered.ravel().take(self.flat_base + (fy * self.cols + fx)).astype(np.float64)
+
+    def region_levels(self, robust, samples):
+        """Gain and offset from the robust-weighted mean levels of object and background pixels,
+        or None when a region has no weight or the template no contrast."""
+        swt_in, swt_out, swi, swo = (robust @ self.setup["levels"]).tolist()
+        if swi <= 0 or swo <= 0:
+            return None
+        ti, to = swt_in / swi, swt_out / swo
+        if ti == to:
+            return None
+        si, so = ((robust * samples) @ self.setup["regions2"]).tolist()
+        g = (si / swi - so / swo) / (ti - to)
+        return g, so / swo - g * to
+
+    def residual(self, samples, g, o, robust) -> np.ndarray:
+        """``I(x + p) − g·T − o``, less each background sector's weighted mean (its own level)."""
+        residual = samples - (g * self.t + o)
+        if self.sec is not None:
             # Each sector's own level: its weighted mean residual is the local background's
             # change, not the object's displacement.
-            sw = prior * robust
+            sec, n_sec = self.sec, self.n_sec
+            sw = self.prior * robust
             local = np.bincount(sec, weights=sw * residual, minlength=n_sec)[:n_sec] / np.maximum(
                 np.bincount(sec, weights=sw, minlength=n_sec)[:n_sec], 1e-12)
             residual = residual - np.append(local, 0.0)[sec]
-        if huber is not None:
-            z = residual * sqrt_prior
-            if spread is None:
-                spread = 1.4826 * _median(np.abs(z - _median(z))) + 1e-9
-            if step > 0.05 or not tukey:
-                # min(1, c/|z|) with c = huber · spread.
-                c = huber * spread
-                robust = c / np.maximum(np.abs(z), c)
-            else:
-                # Close to the answer, Tukey's biweight (c = 4.685 spreads, 95 % efficient for
-                # Gaussian noise) gives occluded pixels no influence at all, where Huber's only
-                # bounds it.
-                u = np.minimum(np.abs(z) / (4.685 * spread), 1.0)
-                robust = (1.0 - u * u) ** 2
-        if joint or (curvature is not None and block is None):
-            w = prior * robust
+        return residual
+
+    def robust_weights(self, residual, huber, spread, tukey: bool):
+        """Huber's (or, with ``tukey``, Tukey's) weights of the residuals scaled by their robust
+        spread, which the first call measures; returns ``(weights, spread)``."""
+        z = residual * self.setup["sqrt_prior"]
+        if spread is None:
+            spread = MAD_TO_SD * _median(np.abs(z - _median(z))) + 1e-9
+        if not tukey:
+            # min(1, c/|z|) with c = huber · spread.
+            c = huber * spread
+            return c / np.maximum(np.abs(z), c), spread
+        # Close to the answer, Tukey's biweight gives occluded pixels no influence at all, where
+        # Huber's only bounds it.
+        u = np.minimum(np.abs(z) / (TUKEY_C * spread), 1.0)
+        return (1.0 - u * u) ** 2, spread
+
+    def normal_equations(self, g, robust, residual, p, block, *, levels_move, instrument, template_variance):
+        """The normal matrix and right-hand side of the step; ``block`` is the curvature block
+        (None: not yet computed at the start, False: unusable). Returns ``(hess, rhs, block)``."""
+        t, tx, ty = self.t, self.tx, self.ty
+        if self.joint or (self.curvature is not None and block is None):
+            w = self.prior * robust
             jx, jy = g * tx, g * ty
             wjx, wjy = w * jx, w * jy
-        if joint:
+        if self.joint:
             jac = np.stack([jx, jy, t, np.ones_like(t)], axis=1)
             inst = jac if instrument is None else np.stack([jx, jy, instrument, np.ones_like(t)], axis=1)
             jw = inst * w[:, None]
@@ -596,71 +645,119 @@ def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=N
             # is the gradient minus what the levels absorb of it (region indicator, not the noisy
             # template, carries the levels). Only the step uses it; the estimating equation
             # Σ w J r = 0 keeps the plain template gradient, uncorrelated with the residual's noise.
-            basis = absorbed_hess if (two_level and step > freeze) else plain_hess
+            basis = self.setup["absorbed_hess"] if levels_move else self.setup["plain_hess"]
             hess = (g * g * (robust @ basis)).reshape(2, 2)
-            rhs = g * ((robust * residual) @ rhs_basis)
-        if curvature is not None:
+            rhs = g * ((robust * residual) @ self.setup["rhs_basis"])
+        if self.curvature is not None:
             if block is None:
-                gix = _remap_points(curvature[0], px + np.float32(p[0]), py + np.float32(p[1]))
-                giy = _remap_points(curvature[1], px + np.float32(p[0]), py + np.float32(p[1]))
-                if two_level:
-                    gix, giy = _absorb(gix, inside, ind_in, ind_out), _absorb(giy, inside, ind_in, ind_out)
-                block = np.array([[wjx @ gix, wjx @ giy], [wjy @ gix, wjy @ giy]])
-                sym = 0.5 * (block + block.T)
-                if not (np.linalg.det(sym) > 0 and np.trace(sym) > 0):
-                    block = False
+                block = self._curvature_block(p, wjx, wjy)
             if block is not False:
                 hess[:2, :2] = block
-        if joint:
+        return hess, rhs, block
+
+    def _curvature_block(self, p, wjx, wjy):
+        """``Σ w J ∇I(x + p)ᵀ`` at the start, or False when it is not positive definite."""
+        curvature, px, py = self.curvature, self.px, self.py
+        gix = _remap_points(curvature[0], px + np.float32(p[0]), py + np.float32(p[1]))
+        giy = _remap_points(curvature[1], px + np.float32(p[0]), py + np.float32(p[1]))
+        if self.two_level:
+            inside, ind_in, ind_out = (self.setup[k] for k in ("inside", "ind_in", "ind_out"))
+            gix, giy = _absorb(gix, inside, ind_in, ind_out), _absorb(giy, inside, ind_in, ind_out)
+        block = np.array([[wjx @ gix, wjx @ giy], [wjy @ gix, wjy @ giy]])
+        sym = 0.5 * (block + block.T)
+        return block if (np.linalg.det(sym) > 0 and np.trace(sym) > 0) else False
+
+    def solve(self, hess, rhs):
+        """``(dx, dy, delta)`` of the step (``delta``: all parameters, joint photometry only), or
+        None when the system is singular or the step not finite."""
+        if self.joint:
             try:
                 delta = np.linalg.solve(hess, rhs)
             except np.linalg.LinAlgError:
-                break
+                return None
             if not np.all(np.isfinite(delta)):
+                return None
+            return float(delta[0]), float(delta[1]), delta
+        # The 2×2 solve in closed form, on Python floats (cheaper than LAPACK at this size).
+        h00, h01, h10, h11 = hess.ravel().tolist()
+        r0, r1 = rhs.tolist()
+        det = h00 * h11 - h01 * h10
+        if det == 0:
+            return None
+        dx, dy = (h11 * r0 - h01 * r1) / det, (h00 * r1 - h10 * r0) / det
+        if not (math.isfinite(dx) and math.isfinite(dy)):
+            return None
+        return dx, dy, None
+
+    def run(self, shift0, gain0, offset0, *, max_iterations, tolerance, huber, tukey, template_variance,
+            instrument, freeze, max_move, early_stop) -> GaussNewtonResult:
+        """The inverse-compositional iteration from ``shift0``, ``gain0``, ``offset0``."""
+        p = np.array(shift0, np.float64)
+        start = p.copy()
+        g, o = float(gain0), float(offset0)
+        converged, step, spread, block, prev, damping = False, np.inf, None, None, None, 1.0
+        robust = np.ones_like(self.t)
+        it, samples, residual, hess = 0, None, None, None
+        for it in range(1, max_iterations + 1):
+            samples = self.sample(p)
+            if self.two_level and step > freeze:
+                # Gain and offset follow the region means while the translation still moves, then
+                # stay fixed (the means move with p, a coupling Gauss–Newton does not model).
+                levels = self.region_levels(robust, samples)
+                if levels is None:
+                    break
+                g, o = levels
+                if abs(g) < MIN_GAIN:
+                    break
+            residual = self.residual(samples, g, o, robust)
+            if huber is not None:
+                robust, spread = self.robust_weights(residual, huber, spread, tukey and step <= TUKEY_FROM_STEP_PX)
+            hess, rhs, block = self.normal_equations(
+                g, robust, residual, p, block, levels_move=self.two_level and step > freeze, instrument=instrument,
+                template_variance=template_variance)
+            solved = self.solve(hess, rhs)
+            if solved is None:
                 break
-            dx, dy = float(delta[0]), float(delta[1])
+            dx, dy, delta = solved
+            # A step that reverses a good part of a previous one longer than 0.1 px means the
+            # linearisation overshoots (noisy Jacobian, a far start): halve the steps from then on.
+            if prev is not None:
+                pp = prev[0] * prev[0] + prev[1] * prev[1]
+                if pp > OVERSHOOT_MIN_STEP_SQ and dx * prev[0] + dy * prev[1] < -OVERSHOOT_REVERSAL * pp:
+                    damping = max(0.5 * damping, MIN_DAMPING)
+            prev = (dx, dy)
+            # Inverse composition: the template moved by delta[:2], so the image position moves back.
+            p[0] -= damping * dx
+            p[1] -= damping * dy
+            if self.joint:
+                g += delta[2]
+                o += delta[3]
+            if abs(g) < MIN_GAIN:
+                break
+            last_step, step = step, damping * math.hypot(dx, dy)
+            # Near the answer the steps shrink geometrically: stop as well when the next one,
+            # extrapolated from the last two, would be below the tolerance.
+            if step < tolerance or (early_stop and it > 1 and step < EARLY_STOP_RATIO * last_step
+                                    and step * step < tolerance * last_step):
+                converged = True
+                break
+            if max(abs(p[0] - start[0]), abs(p[1] - start[1])) > max_move:
+                break
         else:
-            # The 2×2 solve in closed form, on Python floats (cheaper than LAPACK at this size).
-            h00, h01, h10, h11 = hess.ravel().tolist()
-            r0, r1 = rhs.tolist()
-            det = h00 * h11 - h01 * h10
-            if det == 0:
-                break
-            dx, dy = (h11 * r0 - h01 * r1) / det, (h00 * r1 - h10 * r0) / det
-            if not (math.isfinite(dx) and math.isfinite(dy)):
-                break
-        # A step that reverses a good part of a previous one longer than 0.1 px means the
-        # linearisation overshoots (noisy Jacobian, a far start): halve the steps from then on.
-        if prev is not None:
-            pp = prev[0] * prev[0] + prev[1] * prev[1]
-            if pp > 0.01 and dx * prev[0] + dy * prev[1] < -0.25 * pp:
-                damping = max(0.5 * damping, 0.125)
-        prev = (dx, dy)
-        # Inverse composition: the template moved by delta[:2], so the image position moves back.
-        p[0] -= damping * dx
-        p[1] -= damping * dy
-        if joint:
-            g += delta[2]
-            o += delta[3]
-        if abs(g) < 1e-6:
-            break
-        last_step, step = step, damping * math.hypot(dx, dy)
-        # Near the answer the steps shrink geometrically: stop as well when the next one,
-        # extrapolated from the last two, would be below the tolerance.
-        if step < tolerance or (early_stop and it > 1 and step < 0.6 * last_step
-                                and step * step < tolerance * last_step):
-            converged = True
-            break
-        if max(abs(p[0] - start[0]), abs(p[1] - start[1])) > max_move:
-            break
-    else:
-        # Huber re-weighting can make the last digits wander: a step well below a tenth of a
-        # pixel after max_iterations still counts as converged.
-        converged = step < 10 * tolerance
-    return GaussNewtonResult(shift=p, gain=g, offset=o, weights=robust,
-                             inliers=np.count_nonzero(robust >= 1.0) / robust.size,
-                             iterations=it, converged=converged,
-                             samples=samples if samples is not None else np.full_like(t, np.nan))
+            # Huber re-weighting can make the last digits wander: a step well below a tenth of a
+            # pixel after max_iterations still counts as converged.
+            converged = step < 10 * tolerance
+        return self._result(p, g, o, robust, it, converged, samples, residual, hess)
+
+    def _result(self, p, g, o, robust, it, converged, samples, residual, hess) -> GaussNewtonResult:
+        total = self.prior * robust
+        return GaussNewtonResult(
+            shift=p, gain=g, offset=o, weights=robust, inliers=np.count_nonzero(robust >= 1.0) / robust.size,
+            iterations=it, converged=converged,
+            samples=samples if samples is not None else np.full_like(self.t, np.nan),
+            normal_matrix=hess, n_pixels=int(robust.size), weight_total=float(robust.sum()),
+            weighted_ssr=float(total @ (residual * residual)) if residual is not None else float("nan"),
+            robust_ssr=float((total * robust) @ (residual * residual)) if residual is not None else float("nan"))
 
 
 def weighted_ncc(a, b, weights=None) -> float:

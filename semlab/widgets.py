@@ -28,8 +28,9 @@ import numpy as np
 
 from .edges import adaptive_canny_thresholds, canny_edges
 from .plots import figure_png, plot_step_response, plot_track_xy, show_edges, show_frame
-from .roi import as_gray_float, check_roi, clip_window, roi_centre, roi_from_click, roi_from_motion
+from .roi import as_gray_float, check_roi, clip_window, find_motion_roi, roi_centre, roi_from_click
 from .template import identify_contour_template, to_uint8
+from .tracking.options import CANNY_SIGMA
 
 __all__ = ["ServoPanel", "TemplateExplorer", "TrackingPlayer", "display_to_frame", "explore_template",
            "overview_image", "player_state"]
@@ -66,7 +67,7 @@ def _png_figure(nrows, ncols, size, **adjust):
 # ---------------------------------------------------------------------------------------------
 
 def explore_template(frame, roi, *, sigma=2.0, threshold=None, morph_kernel=3, morph_iterations=1,
-                     canny_sigma=1.0, canny_low=None, canny_high=None) -> dict:
+                     canny_sigma=CANNY_SIGMA, canny_low=None, canny_high=None) -> dict:
     """Everything the template explorer shows for one set of parameters.
 
     Runs :func:`semlab.template.identify_contour_template` on the ROI (paper, Fig. 2) and
@@ -115,9 +116,9 @@ def explore_template(frame, roi, *, sigma=2.0, threshold=None, morph_kernel=3, m
     return out
 
 
-def _readout_html(r, pixel_size_nm):
+def _readout_html(r, pixel_size_nm, frame_label=None):
     s = pixel_size_nm
-    parts = [f"<b>ROI</b> {r['roi']}"]
+    parts = [f"<b>ROI</b> {r['roi']}"] + ([f"<b>on</b> {html.escape(frame_label)}"] if frame_label else [])
     th = f"{r['threshold']:.0f}" if np.isfinite(r["threshold"]) else "?"
     parts.append(f"<b>threshold</b> {th} ({'Otsu' if r['otsu'] else 'manual'})")
     if r["ok"]:
@@ -135,13 +136,13 @@ def _readout_html(r, pixel_size_nm):
     return "<div>" + " · ".join(parts) + "</div>"
 
 
-def render_template_figure(frame, r, *, pixel_size_nm=None, size=(14, 3.9)):
+def render_template_figure(frame, r, *, pixel_size_nm=None, size=(14, 3.9), frame_label="frame"):
     """The explorer's figure: frame + ROI, ROI + contour, binary + contour, edge map. Returns a Figure."""
     axes = _png_figure(1, 4, size)[0]
     x, y = r["roi"][:2]
     contour = r["template"].points if r["ok"] else None
     show_frame(frame, axes[0], roi=r["roi"], contour=contour, contour_offset=(x, y),
-               title="(a) frame and ROI")
+               title=f"(a) {frame_label} and ROI")
     show_frame(r["patch"], axes[1], contour=contour, contour_offset=(x, y), origin=(x, y), title="(b) ROI, contour template")
     binary = r["template"].morphed if r["ok"] else np.zeros_like(r["patch"])
     show_frame(binary, axes[2], contour=contour, contour_offset=(x, y), origin=(x, y), title="(d, e) threshold, morphology")
@@ -260,7 +261,9 @@ class TemplateExplorer:
         Adds nm to the readout and the ROI axes.
     motion_frames : sequence of 2-D arrays, optional
         Frames of the probe stepping along x or y; enables the "ROI from motion" button (the paper's
-        second ROI method, :func:`semlab.roi.roi_from_motion`).
+        second ROI method, :func:`semlab.roi.find_motion_roi`). The ROI it finds holds the tip in the
+        last motion frame used, so the explorer then shows and works on that frame (``frame``,
+        ``frame_label``); a refusal (no motion) is shown in the readout.
     overview_width : int
         Width of the clickable overview, px (the frame is downscaled to it, never upscaled).
     **params
@@ -275,7 +278,16 @@ class TemplateExplorer:
         The current parameters, ready for ``semlab.track(frames, explorer.roi, method="contour",
         **explorer.params)``.
     roi : (x, y, w, h)
-        The current ROI.
+        The current ROI, on ``frame``.
+    frame : ndarray
+        The frame the ROI and the template belong to: the frame given, or after *ROI from motion* the
+        motion frame the ROI was found on.
+    frame_label : str
+        ``"frame"`` or ``"motion frame k"`` (shown in the readout and the figure).
+    motion_index : int or None
+        ``k`` when the ROI came from motion frame ``k``, None while it is on the frame given.
+    motion_error : str
+        Why the last *ROI from motion* was refused, '' otherwise.
     controls : dict of ipywidgets
         ``click_x, click_y, roi_size, motion, sigma, otsu, threshold, morph_kernel, morph_iterations,
         adaptive, canny_sigma, canny`` -- set their ``.value`` to drive the explorer from code.
@@ -289,7 +301,7 @@ class TemplateExplorer:
 
     def __init__(self, frame, roi=None, *, click=None, roi_size=200, pixel_size_nm=None, motion_frames=None,
                  overview_width=440, sigma=2.0, threshold=None, morph_kernel=3, morph_iterations=1,
-                 canny_sigma=1.0, canny_low=None, canny_high=None):
+                 canny_sigma=CANNY_SIGMA, canny_low=None, canny_high=None):
         import ipywidgets as w
 
         try:
@@ -298,6 +310,9 @@ class TemplateExplorer:
             Event = None
 
         self.frame = np.asarray(frame)
+        self.frame_label = "frame"
+        self.motion_index = None
+        self.motion_error = ""
         image = as_gray_float(self.frame)
         rows, cols = image.shape
         self.pixel_size_nm = pixel_size_nm
@@ -435,8 +450,28 @@ class TemplateExplorer:
         self.update()
 
     def _on_motion(self, button=None):
+        """The paper's second ROI method: the ROI around the tip in the last motion frame, on that frame."""
         c = self.controls
-        self._roi = roi_from_motion(self.motion_frames, size=int(c["roi_size"].value))
+        try:
+            found = find_motion_roi(self.motion_frames, size=int(c["roi_size"].value))
+        except ValueError as err:   # nothing moves: say so where the user looks, keep the ROI
+            self.motion_error = str(err)
+            self.readout.value = (f"<div><b>ROI from motion refused</b>: {html.escape(self.motion_error)}</div>"
+                                  + _readout_html(self.result, self.pixel_size_nm, self.frame_label))
+            return
+        motion_frame = np.asarray(self.motion_frames[found.frame_index])
+        if motion_frame.shape != self.frame.shape:
+            self.motion_error = (f"the motion frames are {motion_frame.shape[1]}x{motion_frame.shape[0]} px, "
+                                 f"the frame {self.frame.shape[1]}x{self.frame.shape[0]} px")
+            self.readout.value = (f"<div><b>ROI from motion refused</b>: {html.escape(self.motion_error)}</div>"
+                                  + _readout_html(self.result, self.pixel_size_nm, self.frame_label))
+            return
+        self.motion_error = ""
+        # The probe moved while the frames were taken: the ROI holds the tip in the frame it was found on.
+        self.frame = motion_frame
+        self.frame_label = f"motion frame {found.frame_index}"
+        self.motion_index = found.frame_index
+        self._roi = found.roi
         cx, cy = roi_centre(self._roi)
         with self._sync():
             c["click_x"].value, c["click_y"].value = round(cx), round(cy)
@@ -470,20 +505,21 @@ class TemplateExplorer:
                 top = max(c["canny"].max, hi)
                 c["canny"].max = float(np.ceil(top))
                 c["canny"].value = [float(round(lo)), float(round(hi))]
-        self.readout.value = _readout_html(self.result, self.pixel_size_nm)
+        self.readout.value = _readout_html(self.result, self.pixel_size_nm, self.frame_label)
         self._draw_overview()
         t0 = time.perf_counter()
-        fig = render_template_figure(self.frame, self.result, pixel_size_nm=self.pixel_size_nm)
+        fig = render_template_figure(self.frame, self.result, pixel_size_nm=self.pixel_size_nm,
+                                     frame_label=self.frame_label)
         self.image.value = figure_png(fig)
         self.render_ms = 1e3 * (time.perf_counter() - t0)
         return self.result
 
     def _draw_overview(self):
         c = self.controls
-        state = (self._roi, c["click_x"].value, c["click_y"].value)
+        state = (self._roi, c["click_x"].value, c["click_y"].value, self.frame_label)
         if self.overview is None or state == self._overview_drawn:
             return
-        self.overview.value = overview_image(self.frame, self._roi, state[1:], max_width=self._overview_width)
+        self.overview.value = overview_image(self.frame, self._roi, state[1:3], max_width=self._overview_width)
         self._overview_drawn = state
 
     def _repr_mimebundle_(self, **kwargs):

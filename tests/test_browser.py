@@ -9,6 +9,11 @@ probe tip", through ipyevents) at known places -- at the overview's own size and
 and asserts that the readout shows the 200x200 ROI around each click, shifted inside the frame at the
 border. Screenshots land in ``test-output/browser/``.
 
+For every notebook with a conclusion it opens the notebook, runs it and saves a screenshot of its "What we see"
+section, as JupyterLab shows it, in ``test-output/browser/conclusions/<notebook>.png`` (the paths are printed and
+listed in ``conclusions/index.txt``). Last, it saves notebook 01, shuts its kernel down and reopens it: the widgets
+must come back from the state saved in the notebook, without "Error displaying widget: model not found".
+
 It is skipped, with a message, only when ``/usr/bin/chromium`` is missing (``make test`` installs it).
 """
 
@@ -127,8 +132,10 @@ class Lab:
             time.sleep(0.5)
         raise TimeoutError(f"JupyterLab did not answer on {self.base} within {timeout:.0f} s:\n{self.log()}")
 
-    def url(self, notebook: str) -> str:
-        return f"{self.base}/lab/tree/{notebook}?token={self.token}"
+    def url(self, notebook: str, *, workspace: str | None = None) -> str:
+        """The notebook's URL; in a workspace of its own (no tabs restored from earlier pages) if named."""
+        where = f"workspaces/{workspace}/tree" if workspace else "tree"
+        return f"{self.base}/lab/{where}/{notebook}?token={self.token}" + ("&reset" if workspace else "")
 
     def log(self) -> str:
         self._log.flush()
@@ -318,24 +325,33 @@ def _contour_area(readout: str) -> float | None:
 
 
 @pytest.fixture(scope="module")
-def notebook_page(lab):
-    """A chromium page showing notebook 01, run to the end in JupyterLab (shared by the tests below)."""
+def browser():
+    """Debian's chromium, driven by Playwright (one per module: the sync API allows one at a time)."""
     from playwright.sync_api import sync_playwright
 
-    assert NOTEBOOK.exists(), f"{NOTEBOOK} is missing"
     OUTPUT.mkdir(parents=True, exist_ok=True)
     with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS)
+        chromium = p.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS)
         try:
-            page = browser.new_page(viewport={"width": 1400, "height": 1000})
-            try:
-                open_and_run(page, lab, NOTEBOOK.name)
-            except Exception:
-                _save_failure(page, lab)
-                raise
-            yield page
+            yield chromium
         finally:
-            browser.close()
+            chromium.close()
+
+
+@pytest.fixture(scope="module")
+def notebook_page(lab, browser):
+    """A chromium page showing notebook 01, run to the end in JupyterLab (shared by the tests below)."""
+    assert NOTEBOOK.exists(), f"{NOTEBOOK} is missing"
+    page = browser.new_page(viewport={"width": 1400, "height": 1000})
+    page.semlab_console = []   # every console message of the page, for the reopening test
+    page.on("console", lambda msg: page.semlab_console.append(msg.text))
+    try:
+        open_and_run(page, lab, NOTEBOOK.name)
+    except Exception:
+        _save_failure(page, lab)
+        raise
+    yield page
+    page.close()
 
 
 def _save_failure(page, lab: Lab) -> None:
@@ -409,3 +425,135 @@ def test_a_click_on_the_overview_cuts_the_roi_around_it(notebook_page, lab):
     scaled = {name: c for name, _, c in results}["css-scaled"]
     assert scaled["width"] == pytest.approx(264, abs=1), f"the overview was not shrunk by CSS: {scaled}"
     assert _roi_in(results[-1][2]["after"]) == (cols - ROI_SIZE, rows - ROI_SIZE, ROI_SIZE, ROI_SIZE)
+
+
+# --- the notebooks' conclusions, as JupyterLab shows them ----------------------------------------------
+
+CONCLUSIONS = OUTPUT / "conclusions"
+EXECUTED = ROOT / "test-output" / "notebooks"   # where tests/test_notebooks.py leaves the executed copies
+CONCLUDED = [p for p in sorted((ROOT / "notebooks").glob("*.ipynb"))
+             if "## What we see" in p.read_text(encoding="utf-8")]
+VISIBLE_CELLS = ".jp-NotebookPanel:not(.lm-mod-hidden) .jp-Notebook .jp-Cell"
+
+
+def _api(lab: Lab, path: str, method: str = "GET"):
+    req = urllib.request.Request(f"{lab.base}/api/{path}?token={lab.token}", method=method)
+    with urllib.request.urlopen(req, timeout=30) as r:
+        body = r.read()
+    return json.loads(body) if body else None
+
+
+def _shut_down_kernels(lab: Lab, under: str = "") -> None:
+    """Shut down the kernels of the sessions whose notebook lies ``under`` a folder ('' for all)."""
+    for session in _api(lab, "sessions"):
+        if session["path"].startswith(under):
+            _api(lab, f"sessions/{session['id']}", method="DELETE")
+
+
+def _shown_copy(path: Path, lab: Lab) -> tuple[str, bool]:
+    """The notebook JupyterLab opens for the screenshot: the executed copy when it is fresh, else the source.
+
+    Running every notebook again in the browser would double their CI time; after ``tests/test_notebooks.py``
+    (run it first, or ``make test`` twice) the picture shows the conclusion with the numbers above it.
+    """
+    executed = EXECUTED / path.name
+    fresh = executed.exists() and executed.stat().st_mtime >= path.stat().st_mtime
+    folder = lab.root / "shown"
+    folder.mkdir(exist_ok=True)
+    shutil.copy(executed if fresh else path, folder / path.name)
+    return f"shown/{path.name}", fresh
+
+
+@pytest.mark.timeout(180)
+@pytest.mark.parametrize("path", CONCLUDED, ids=lambda p: p.name)
+def test_the_conclusion_shows_in_jupyterlab(path, lab, browser):
+    CONCLUSIONS.mkdir(parents=True, exist_ok=True)
+    shown, executed = _shown_copy(path, lab)
+    page = browser.new_page(viewport={"width": 1400, "height": 1000})
+    try:
+        page.goto(lab.url(shown, workspace=path.stem), wait_until="domcontentloaded", timeout=60_000)
+        n_cells = len(json.loads(path.read_text(encoding="utf-8"))["cells"])
+        page.wait_for_function("([sel, n]) => document.querySelectorAll(sel).length === n",
+                               arg=[VISIBLE_CELLS, n_cells], timeout=60_000, polling=250)
+        _dismiss_dialogs(page)
+        page.wait_for_timeout(500)   # let the notebook settle (the active cell scrolls into view)
+        cell = page.locator(VISIBLE_CELLS).last
+        cell.scroll_into_view_if_needed()
+        heading = cell.locator(".jp-RenderedMarkdown h2")
+        heading.wait_for(state="visible", timeout=30_000)
+        assert heading.inner_text().strip().startswith("What we see"), heading.inner_text()
+        assert len(cell.inner_text().split()) >= 60, "the conclusion rendered as a stub"
+        if executed:   # the table of numbers the conclusion rests on, in the cell before it
+            numbers = page.locator(VISIBLE_CELLS).nth(-2)
+            assert "RESULTS" in numbers.inner_text()
+            top, bottom = numbers.bounding_box(), cell.bounding_box()
+            height = int(bottom["y"] + bottom["height"] - top["y"]) + 250   # + menu, toolbar, status bar
+            page.set_viewport_size({"width": 1400, "height": max(1000, min(height, 4000))})
+            numbers.scroll_into_view_if_needed()
+        page.wait_for_timeout(500)
+        shot = CONCLUSIONS / f"{path.stem}.png"
+        page.screenshot(path=str(shot))
+        cell.screenshot(path=str(CONCLUSIONS / f"{path.stem}-text.png"))
+        with open(CONCLUSIONS / "index.txt", "a", encoding="utf-8") as index:
+            index.write(f"{shot}{'' if executed else '  (conclusion only: no executed copy yet)'}\n")
+        print(f"conclusion of {path.name}: {shot}")
+    except Exception:
+        page.screenshot(path=str(OUTPUT / f"failure-{path.stem}.png"))
+        (OUTPUT / "jupyterlab.log").write_text(lab.log())
+        raise
+    finally:
+        page.close()
+        _shut_down_kernels(lab, under="shown/")
+
+
+# --- reopening a saved notebook (must stay the last test: it restarts notebook 01's kernel) -----------
+
+MODEL_NOT_FOUND = "model not found"
+
+
+@pytest.mark.timeout(300)
+def test_a_saved_notebook_reopens_with_its_widgets(notebook_page, lab):
+    page = notebook_page
+    name = NOTEBOOK.name
+    try:
+        before = _api(lab, f"contents/{name}")["last_modified"]
+        # JupyterLab's own save command on the notebook (what Ctrl+S runs), not a menu hunt
+        page.evaluate("() => window.jupyterapp.commands.execute('docmanager:save')")
+        deadline = time.monotonic() + 30
+        while _api(lab, f"contents/{name}")["last_modified"] == before:
+            assert time.monotonic() < deadline, "the notebook was not saved within 30 s"
+            page.wait_for_timeout(300)
+        saved = _api(lab, f"contents/{name}")["content"]
+        views = {o["data"]["application/vnd.jupyter.widget-view+json"]["model_id"]
+                 for c in saved["cells"] if c["cell_type"] == "code" for o in c.get("outputs", [])
+                 if "application/vnd.jupyter.widget-view+json" in o.get("data", {})}
+        assert views, "the saved notebook holds no widget outputs to reopen"
+        state = saved["metadata"].get("widgets", {}).get("application/vnd.jupyter.widget-state+json", {})
+        # The cause of "model not found": widget outputs saved, their models' state not (saveState false).
+        assert views <= set(state.get("state", {})), (
+            "the notebook was saved without its widgets' state (JupyterLab's saveState setting): "
+            f"{len(views - set(state.get('state', {})))} widget outputs would reopen as 'model not found'")
+
+        _shut_down_kernels(lab)                    # as after closing JupyterLab: the models are gone
+        seen = len(page.semlab_console)
+        page.reload(wait_until="domcontentloaded")
+        page.wait_for_selector(".jp-NotebookPanel .jp-Notebook .jp-Cell", timeout=60_000)
+        _wait_kernel_idle(page, 90)
+        # Either the explorer is rebuilt from the saved state, or its output says the model is missing.
+        page.wait_for_function(
+            "([cls, msg]) => document.querySelector('.' + cls) !== null || document.body.innerText.includes(msg)",
+            arg=[OVERVIEW_CLASS, MODEL_NOT_FOUND], timeout=60_000, polling=250)
+        page.wait_for_timeout(3000)               # the manager gives up on a missing model after 2 s
+        overview = page.locator(f".{OVERVIEW_CLASS}").first
+        if overview.count():
+            overview.scroll_into_view_if_needed()
+        page.screenshot(path=str(OUTPUT / "reopened.png"))
+    except Exception:
+        _save_failure(page, lab)
+        raise
+    text = page.locator(".jp-NotebookPanel").first.inner_text()
+    assert MODEL_NOT_FOUND not in text, "a reopened widget output says 'Error displaying widget: model not found'"
+    logged = [m for m in page.semlab_console[seen:] if MODEL_NOT_FOUND in m]
+    assert not logged, f"the browser logged: {logged[:3]}"
+    assert overview.count() and overview.evaluate("el => el.tagName === 'IMG' && el.naturalWidth > 0"), (
+        "the explorer's overview did not come back from the saved state")

@@ -42,7 +42,11 @@ def _fei_tiff() -> Path:
 
 
 def _contact_seq() -> Path:
-    return _real("autoliftout/contact_brightness_seq", "contact_brightness_seq")
+    """The motion sequence as semlab ships it in data/ (../shared keeps the reference frame beside it)."""
+    folder = REPO / "data" / "real-sem" / "contact_brightness_seq"
+    if not folder.is_dir():
+        pytest.skip("data/real-sem/contact_brightness_seq is not available")
+    return folder
 
 
 def _probe_frames(n=4, shift=(2.0, 1.0), shape=(120, 160)):
@@ -296,7 +300,7 @@ def test_track_moving_blob_with_pixel_size_and_sidecar(tmp_path, capsys):
     np.testing.assert_allclose(df["x_nm"], df["x"] * 6.6, rtol=1e-6, atol=1e-5)
     np.testing.assert_allclose(df["y_nm"], df["y"] * 6.6, rtol=1e-6, atol=1e-5)
     assert df["file"].tolist() == [f"frame_{k}.png" for k in range(5)]
-    assert meta["pixel_size_nm"] == 6.6 and meta["pixel_size_source"] == "explicit pixel_size_nm"
+    assert meta["pixel_size_nm"] == 6.6 and meta["pixel_size_source"] == "--pixel-size"
     assert meta["roi"] == list(roi) and meta["n_frames"] == 5 and meta["n_ok"] == 5
     assert [Path(i["path"]).name for i in meta["inputs"]] == [f"frame_{k}.png" for k in range(5)]
     for item in meta["inputs"]:
@@ -359,11 +363,13 @@ def test_track_real_contact_brightness_folder(tmp_path, capsys):
     )
     assert code == EXIT_OK
     df, meta = _read_result(out)
-    assert len(df) == 12 and len(meta["inputs"]) == 12
-    assert df["file"].iloc[-1] == "needle_liftout_land_ib.png"  # natural order puts it last
-    assert df["file"].iloc[10] == "liftout_contact_brightness_10_ib.png"
+    # The 11 motion frames, in natural order; the reference frame lives in its own folder.
+    assert len(df) == 11 and len(meta["inputs"]) == 11
+    assert df["file"].tolist() == [f"liftout_contact_brightness_{k}_ib.png" for k in range(11)]
     assert (df.loc[0, "x"], df.loc[0, "y"]) == pytest.approx((479.5, 279.5))
     assert meta["pixel_size_nm"] is None and df["x_nm"].isna().all()
+    assert "pass --pixel-size NM" in meta["pixel_size_source"]
+    assert "pixel_size_nm" not in capsys.readouterr().out
     # The needle advances to the right (+x) in frames 1-3 by ~4-10 px per step (PROVENANCE.md).
     early = df.iloc[1:4]
     early = early[early["ok"]]
@@ -435,3 +441,83 @@ def test_console_script_and_python_m(tmp_path):
         check=False,
     )
     assert res.returncode == 0 and "97.66 nm" in res.stdout
+
+
+# --------------------------------------------------------------------------- order, parameters, wording
+
+
+def test_files_in_shell_glob_order_are_tracked_in_natural_order_with_a_note(tmp_path, capsys):
+    frames = _probe_frames(11, shift=(1.0, 0.0))
+    folder = _write_seq(tmp_path / "seq", frames)
+    shell = sorted(str(p) for p in folder.glob("frame_*.png"))  # how a shell expands frame_*.png
+    assert [Path(p).name for p in shell[:3]] == ["frame_0.png", "frame_1.png", "frame_10.png"]
+    out = tmp_path / "t.csv"
+    assert main(["track", *shell, "--roi", "40,30,61,51", "--out", str(out), "--no-progress"]) == EXIT_OK
+    err = capsys.readouterr().err
+    assert "not in natural order" in err and "--keep-order" in err
+    df, meta = _read_result(out)
+    assert df["file"].tolist() == [f"frame_{k}.png" for k in range(11)]
+    assert meta["input_order"] == "natural"
+    # The blob steps +1 px per frame: in natural order x grows monotonically.
+    assert (np.diff(df["x"]) > 0).all()
+
+    out2 = tmp_path / "kept.csv"
+    assert main(["track", *shell, "--roi", "40,30,61,51", "--out", str(out2), "--no-progress",
+                 "--keep-order", "-q"]) == EXIT_OK  # fmt: skip
+    assert "natural order" not in capsys.readouterr().err
+    kept, meta2 = _read_result(out2)
+    assert kept["file"].tolist() == [Path(p).name for p in shell] and meta2["input_order"] == "given"
+
+
+def test_a_folder_in_natural_order_gets_no_note(tmp_path, capsys):
+    folder = _write_seq(tmp_path / "seq", _probe_frames(3))
+    out = tmp_path / "t.csv"
+    assert main(["track", str(folder), "--roi", "40,30,61,51", "--out", str(out), "--no-progress"]) == 0
+    assert "natural order" not in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("param", "message"),
+    [
+        ("sigma=abc", "sigma needs float, got str"),
+        ("sigma=true", "sigma needs float, got bool"),
+        ("search_size=2.5", "search_size needs int, got float"),
+        ("band_px=[3]", "band_px needs int or none, got list"),
+        ("whiten=1", "whiten needs bool, got int"),
+        ("photometry=3", "photometry needs str, got int"),
+        ("nonsense=1", "not a tracker parameter"),
+        ("search_size=4", "search_size must be an integer of at least 16"),  # the Tracker's own check
+    ],
+)
+def test_a_bad_param_is_a_usage_error_before_reading_or_tracking(tmp_path, capsys, param, message):
+    out = tmp_path / "t.csv"
+    # The input does not exist: a parameter checked before reading answers 2, not 3 (input error).
+    code = main(["track", str(tmp_path / "missing.png"), "--roi", "0,0,20,20", "--param", param,
+                 "--out", str(out)])  # fmt: skip
+    assert code == EXIT_USAGE
+    err = _err_line(capsys)
+    assert message in err, err
+    assert _outputs(tmp_path) == []
+
+
+def test_good_params_of_every_type_are_accepted(tmp_path, capsys):
+    folder = _write_seq(tmp_path / "seq", _probe_frames(3))
+    out = tmp_path / "t.csv"
+    code = main(["track", str(folder), "--roi", "40,30,61,51", "--out", str(out), "--no-progress", "-q",
+                 "--param", "sigma=1", "--param", "search_size=200.0", "--param", "threshold=none",
+                 "--param", "whiten=false", "--param", "photometry=regions"])  # fmt: skip
+    assert code == EXIT_OK, capsys.readouterr().err
+    _, meta = _read_result(out)
+    assert meta["params"] == {"sigma": 1, "search_size": 200.0, "threshold": None, "whiten": False,
+                              "photometry": "regions"}
+
+
+def test_unknown_pixel_size_names_the_flag(tmp_path, capsys):
+    folder = _write_seq(tmp_path / "seq", _probe_frames(3))
+    assert main(["info", str(folder)]) == EXIT_OK
+    out = capsys.readouterr().out
+    assert "pass --pixel-size NM" in out and "pixel_size_nm" not in out
+    assert main(["track", str(folder), "--roi", "40,30,61,51", "--out", str(tmp_path / "t.csv"),
+                 "--no-progress"]) == EXIT_OK  # fmt: skip
+    out = capsys.readouterr().out
+    assert "pass --pixel-size NM" in out and "pixel_size_nm" not in out

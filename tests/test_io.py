@@ -90,11 +90,33 @@ def test_glob_reads_matches_in_natural_order(tmp_path):
     np.testing.assert_array_equal(seq.frames[2], frames[10])
 
 
-def test_list_keeps_given_order(tmp_path):
+def test_a_list_in_shell_glob_order_is_read_in_natural_order(tmp_path):
+    frames = _write_pngs(tmp_path, [0, 1, 2, 10])
+    # What `semlab track frame_*.png` receives from a shell: character order, 10 before 2.
+    shell = [tmp_path / f"frame_{i}.png" for i in (0, 1, 10, 2)]
+    seq = read_frames([str(p) for p in shell])
+    assert [p.name for p in seq.paths] == ["frame_0.png", "frame_1.png", "frame_2.png", "frame_10.png"]
+    np.testing.assert_array_equal(seq.frames, np.stack([frames[i] for i in (0, 1, 2, 10)]))
+    assert seq.meta["reordered"] is True
+    assert [Path(p).name for p in seq.meta["given_order"]] == [p.name for p in shell]
+    assert expand_inputs(shell) == [tmp_path / f"frame_{i}.png" for i in (0, 1, 2, 10)]
+
+
+def test_order_given_keeps_a_list_as_given(tmp_path):
     frames = _write_pngs(tmp_path, [1, 2, 3])
-    seq = read_frames([tmp_path / "frame_3.png", str(tmp_path / "frame_1.png")])
+    seq = read_frames([tmp_path / "frame_3.png", str(tmp_path / "frame_1.png")], order="given")
     np.testing.assert_array_equal(seq.frames, np.stack([frames[3], frames[1]]))
+    assert seq.meta["reordered"] is False and "given_order" not in seq.meta
     assert expand_inputs([tmp_path / "frame_2.png"]) == [tmp_path / "frame_2.png"]
+    with pytest.raises(ValueError, match="order"):
+        expand_inputs([tmp_path / "frame_2.png"], order="alphabetical")
+
+
+def test_a_folder_or_natural_list_is_not_reported_as_reordered(tmp_path):
+    _write_pngs(tmp_path / "run", [2, 10, 1])
+    assert read_frames(tmp_path / "run").meta["reordered"] is False
+    files = sorted((tmp_path / "run").glob("*.png"), key=natural_sort_key)
+    assert read_frames(files).meta["reordered"] is False
 
 
 def test_multipage_tiff_gives_one_frame_per_page(tmp_path):
@@ -383,6 +405,14 @@ def test_data_path_and_real_samples():
     seq = load_sample("contact_brightness_seq")
     assert seq.frames.shape == (11, 717, 1075)
     assert seq.files[-1].name == "liftout_contact_brightness_10_ib.png"
+    # The reference frame is not one of the motion frames: reading the folder gives the 11 frames.
+    folder = read_frames(root / "real-sem" / "contact_brightness_seq")
+    assert [p.name for p in folder.files] == [f"liftout_contact_brightness_{k}_ib.png" for k in range(11)]
+    np.testing.assert_array_equal(folder.frames, seq.frames)
+    ref = load_sample("contact_brightness_reference")
+    assert ref.frames.shape == (1, 717, 1075)
+    assert ref.files[0].parent.name == "contact_brightness_reference"
+    assert not any(np.array_equal(ref.frames[0], f) for f in seq.frames)
     assert seq.pixel_size_nm == pytest.approx(80e3 / 1536) and "inferred" in seq.pixel_size_source
     fei = load_sample("fei_needle")
     assert round(fei.pixel_size_nm, 2) == 97.66

@@ -1,10 +1,21 @@
-"""Every notebook runs top to bottom in fast mode, and is committed without outputs.
+"""Every notebook runs top to bottom in fast mode, ends on what its results show, and says only what they show.
+
+Each notebook's last cell is its conclusion, a markdown cell headed "What we see"; the code cell before it
+stores the numbers that conclusion rests on in a dict ``RESULTS`` and shows them as a table. After the
+notebook has run (with ``SEMLAB_FAST=1``, as in CI), this test reads ``RESULTS`` from the kernel and checks
+each claim of the conclusion against it (the ``CLAIMS`` below quote the sentences they check), so prose and
+numbers cannot drift apart. The claims are chosen to hold on the notebook's default parameters in fast mode
+and in full mode alike (``SEMLAB_NOTEBOOKS_FULL=1`` runs them in full mode, about 5 minutes); a claim that stops
+holding is a conclusion to rewrite, not a tolerance to widen.
 
 The executed copies land in ``test-output/notebooks/`` so that a failing run can be inspected.
 """
 
 from __future__ import annotations
 
+import json
+import math
+import os
 from pathlib import Path
 
 import nbformat
@@ -14,6 +25,17 @@ from nbclient import NotebookClient
 ROOT = Path(__file__).resolve().parents[1]
 NOTEBOOKS = sorted((ROOT / "notebooks").glob("*.ipynb"))
 OUTPUT = ROOT / "test-output" / "notebooks"
+CONCLUSION = "## What we see"
+RESULTS_MARK = "SEMLAB-RESULTS "
+
+# Reads RESULTS from the kernel after the notebook ran (not saved into the executed copy).
+_READ_RESULTS = f"""
+import json as _json
+def _plain(v):
+    return v.item() if hasattr(v, "item") else str(v)
+if "RESULTS" in globals():
+    print({RESULTS_MARK!r} + _json.dumps(RESULTS, default=_plain))
+"""
 
 
 def test_there_are_notebooks():
@@ -28,18 +50,285 @@ def test_notebook_is_stripped(path):
     assert not dirty, f"{path.name}: cells {dirty} carry outputs; run `make strip`"
 
 
-@pytest.mark.notebooks
-@pytest.mark.timeout(900)
+# Notebooks whose conclusion their owners are still writing (issue 15 asks it of every notebook).
+PENDING_CONCLUSION = {"08_evaluation.ipynb", "09_real_instrument.ipynb"}
+
+
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.name)
-def test_notebook_executes(path, monkeypatch):
-    # The kernel inherits this environment: fast mode, and Jupyter's inline figures.
-    monkeypatch.setenv("SEMLAB_FAST", "1")
-    monkeypatch.delenv("MPLBACKEND", raising=False)
+def test_notebook_ends_on_what_we_see(path):
+    if path.name in PENDING_CONCLUSION:
+        pytest.xfail(f"{path.name}: its owner adds the 'What we see' conclusion (issue 15)")
     nb = nbformat.read(path, as_version=4)
+    last = nb.cells[-1]
+    assert last.cell_type == "markdown" and last.source.lstrip().startswith(CONCLUSION), (
+        f"{path.name} does not end on a '{CONCLUSION}' markdown cell")
+    assert len(last.source.split()) >= 60, f"{path.name}: the conclusion is a stub"
+    before = nb.cells[-2]
+    assert before.cell_type == "code" and "RESULTS" in before.source, (
+        f"{path.name}: the cell before the conclusion should store its numbers in RESULTS")
+    assert path.name in CLAIMS, f"{path.name}: no claims check in tests/test_notebooks.py"
+
+
+def _execute(path: Path) -> dict | None:
+    """Run ``path`` in fast mode; return its RESULTS (None when it has none)."""
+    nb = nbformat.read(path, as_version=4)
+    nb.cells.append(nbformat.v4.new_code_cell(_READ_RESULTS))
     client = NotebookClient(nb, timeout=600, kernel_name="python3",
                             resources={"metadata": {"path": str(path.parent)}})
     try:
         client.execute()
     finally:
+        reader = nb.cells.pop()
         OUTPUT.mkdir(parents=True, exist_ok=True)
         nbformat.write(nb, OUTPUT / path.name)
+    for out in reader.get("outputs", []):
+        text = out.get("text", "")
+        if out.get("output_type") == "stream" and text.startswith(RESULTS_MARK):
+            return json.loads(text[len(RESULTS_MARK):])
+    return None
+
+
+@pytest.mark.notebooks
+@pytest.mark.timeout(900)
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.name)
+def test_notebook_executes_and_its_conclusion_holds(path, monkeypatch):
+    # The kernel inherits this environment: fast mode (SEMLAB_NOTEBOOKS_FULL=1 checks the same claims on a full
+    # run, e.g. before committing a conclusion), and Jupyter's inline figures.
+    if os.environ.get("SEMLAB_NOTEBOOKS_FULL") == "1":
+        monkeypatch.delenv("SEMLAB_FAST", raising=False)
+    else:
+        monkeypatch.setenv("SEMLAB_FAST", "1")
+    monkeypatch.delenv("MPLBACKEND", raising=False)
+    results = _execute(path)
+    check = CLAIMS.get(path.name)
+    if check is None:
+        return
+    assert results is not None, f"{path.name} stores no RESULTS"
+    check(results)
+
+
+# --------------------------------------------------------------------------- the claims, per notebook
+# Each function quotes the sentence of the notebook's "What we see" it checks. Tolerances say where they
+# come from; most claims are orderings (A below B), which need none.
+
+
+def _claims_00(r):
+    # "a 640×480 frame every 1/13 s at 66 nm/px"
+    assert (r["width_px"], r["height_px"]) == (640, 480) and math.isclose(r["frame_rate_hz"], 13.0)
+    assert math.isclose(r["pixel_size_nm"], 66.0, rel_tol=0.01)
+    # "the descending branch lies above the ascending one at every inner voltage, by up to about 47 px of the
+    # 280 px the sweep reaches (17 %)": "about" = within 15 % (fast mode samples the loop at 15 voltages, the
+    # full run at 40, so the largest gap seen moves by a few px).
+    assert r["hysteresis_branches_ordered"]
+    assert 40.0 < r["hysteresis_gap_max_px"] < 54.0 and 265.0 < r["sweep_travel_px"] < 295.0
+    # "the axis refuses a NaN command with an error instead of moving"
+    assert r["nan_command_refused"]
+    # "the low-dose sequence has the largest, 0.22 px against 0.10 px for the static one; ... it is 2.19"
+    assert r["crb_largest"] == "low_dose"
+    assert round(r["crb_low_dose_px"], 2) == 0.22 and round(r["crb_static_px"], 2) == 0.10
+    assert round(r["crb_ratio_low_dose"], 2) == 2.19
+
+
+def _claims_01(r):
+    # "The ROI from motion lands on the probe's front in the last motion frame (motion frame 9), the frame it
+    # was found on"
+    assert r["motion_roi_frame"] == 9 and r["motion_roi_holds_tip_of_last_frame"]
+    # "the contour template runs through the true tip": within 2 px, the edge blur of the render
+    assert r["tip_to_contour_px"] < 2.0
+    # "and holds 267 of the ROI's 40,000 pixels (0.7 %)"
+    assert (r["contour_px"], r["roi_px"]) == (267, 40000)
+    # "the fixed low pair 10/30 marks more edge pixels than eq. 10's pair (1.7 times as many in the fast run's
+    # 12 frames, 2.4 over 100)"
+    assert r["edge_px_ratio_low_to_adaptive"] in (1.68, 2.41)
+    # "eq. 10 puts T_h between 23 and 45"
+    assert 23.0 <= r["adaptive_T_h_min"] and r["adaptive_T_h_max"] <= 45.5
+    # "On the gray-level-fluctuation scene the adaptive pair gives exactly the low pair's track"
+    assert r["gray_adaptive_same_track_as_low"] and r["gray_40_80_same_track_as_80_160"]
+    # "With dense clutter and an occluder, or at low dose, eq. 10's pair ... tracks 2 to 13 times worse than a
+    # fixed 40/80 pair" (contradicts the paper)
+    for kind in ("clutter_occluder", "low_dose"):
+        assert 2.0 <= r[f"rmse_ratio_adaptive_to_40_80_{kind}"] <= 13.0, kind
+    # "Only a pair too high for the probe's edges (150/300) loses the probe outright, which eq. 10 never does"
+    assert r["loss_fixed_high_min"] == 1.0 and r["loss_adaptive_max"] < 0.2
+    # "the probe's steps grow from 0 to 17.9 px"
+    assert abs(r["step_min_px"]) < 0.05 and round(r["step_max_px"], 1) == 17.9
+    # "With Canny σ = 1 px the contour tracker puts 4 of those 10 frames 2 to 10 px off, almost all along x, ...
+    # and reports every one of them ok; ... with the tracker's default σ = 2 px no frame is more than 2 px off"
+    assert r["motion_frames_tracked"] == 10
+    assert r["off_frames_canny_sigma_1"] == 4 == r["off_frames_ok_canny_sigma_1"]
+    assert 8.0 < r["max_error_px_canny_sigma_1"] < 10.5 and r["off_error_share_along_x_min"] > 0.9
+    assert r["off_frames_canny_sigma_2"] == 0 and r["max_error_px_canny_sigma_2"] < 2.0
+
+
+def _claims_02(r):
+    # "semlab's default spreads 0.128 px over 100 detections (0.120 over fast mode's 20), 1.2-1.3 times the
+    # Cramér-Rao bound of 0.101 px and below the paper's 0.2268 px"
+    assert (r["n_frames"], round(r["ic_std_px"], 3)) in ((100, 0.128), (20, 0.120))
+    assert 1.15 <= r["ic_std_over_crb"] <= 1.3 and r["crb_px"] == 0.101
+    # "the paper's contour tracker ... spreads more than the paper reports (0.36 px; 0.26 in fast mode)"
+    assert round(r["contour_std_px"], 2) == {100: 0.36, 20: 0.26}[r["n_frames"]] > 0.2268
+    # "The OpenCV correlators spread less than the bound (0.6-0.9 times)"
+    assert r["best_peer"].startswith("opencv") and 0.6 <= r["best_peer_std_over_crb"] < 0.9
+    # the sweep (40 frames per point in both modes): "the paper's contour tracker spread 3.12 px at 100 pA ...
+    # one frame of 40 that jumped 19.8 px and was reported ok"
+    assert r["sweep_doses_pA"] == [6.25, 100.0]
+    assert r["contour_std_highest_dose"] == 3.116
+    assert r["contour_frames_off_highest_dose"] == 1 == r["contour_off_but_ok_highest_dose"]
+    assert r["contour_max_error_highest_dose"] == 19.8
+    # "without its frames more than 2 px off, its spread falls steadily with the dose, from 0.75 px at 6.25 pA
+    # to 0.04 px at 100 pA"
+    assert r["contour_std_within_2px_monotone"]
+    assert round(r["contour_std_within_2px_lowest_dose"], 2) == 0.75
+    assert round(r["contour_std_within_2px_highest_dose"], 2) == 0.04
+    # "At 6.25 pA it has 6 such frames (5 reported ok), and semlab's default one (3.2 px off, reported ok)"
+    assert (r["contour_frames_off_lowest_dose"], r["contour_off_but_ok_lowest_dose"]) == (6, 5)
+    assert r["ic_off_but_ok_lowest_dose"] == 1 and r["ic_max_error_lowest_dose"] == 3.2
+    # "The SSD baseline loses every frame at 6.25 pA ...; that point ... is now a cross on the bottom edge"
+    assert r["ssd_all_lost_lowest_dose"] and r["missing_points"] >= 1
+    assert r["missing_points_marked"] >= r["missing_points"]
+    # "semlab's default spreads more as the dose falls, from 0.11 px at 100 pA to 0.69 px at 6.25 pA, 1.5 to 2.5
+    # times the bound"
+    assert round(r["ic_std_highest_dose"], 2) == 0.11 and round(r["ic_std_lowest_dose"], 2) == 0.69
+    assert 1.5 <= r["ic_std_over_crb_highest_dose"] and r["ic_std_over_crb_lowest_dose"] <= 2.5
+
+
+def _claims_03(r):
+    full = r["n_cycles"] == 5          # fast mode runs 2 of the paper's five cycles
+    # "semlab's default follows the A->B->A moves of 200 px with an RMSE of 0.18 px ..., never more than 0.6 px off"
+    assert round(r["ic_rmse_px"], 2) in (0.18, 0.17) and r["ic_max_error_px"] < 0.6
+    # "The paper's contour tracker ... is 18 px RMSE with a maximum of 112 px over five cycles (2.0 px and 16.9 px
+    # over fast mode's two)"
+    assert (r["contour_rmse_px"], r["contour_max_error_px"]) == ((18.0, 112.2) if full else (2.0, 16.9))
+    # "it reports every frame ok, its score never below 0.48 against its 0.3 threshold"
+    assert r["contour_frames_flagged"] == 0 and r["contour_off_min_score"] >= 0.48
+    # "Its 19 frames more than 2 px off (3 in fast mode) ... every error points within 7° of the template's upper
+    # (17°) or lower (4°) edge"
+    assert r["contour_off_frames"] == (19 if full else 3) == r["contour_off_frames_ok"]
+    assert r["contour_off_to_edge_deg_max"] < 7.0
+    assert round(r["upper_edge_deg"]) == 17 and round(r["lower_edge_deg"]) == 4
+    # "At B semlab's tracked position spreads 0.85 px over the 65 frames dwelling there (0.69 px over fast mode's
+    # 26) ... the true tip itself spreads 0.86 px (0.71) ... semlab's own error at B spreads only 0.13 px"
+    assert r["frames_at_b"] == (65 if full else 26)
+    assert round(r["ic_tracked_std_at_b_px"], 2) == (0.85 if full else 0.69)
+    assert round(r["true_std_at_b_px"], 2) == (0.86 if full else 0.71)
+    assert round(r["ic_error_std_at_b_px"], 2) in (0.13, 0.14)
+    # "The tip drifts on by 1.7 to 2.0 px through every 13-frame dwell"
+    assert 1.65 <= r["creep_per_dwell_px_min"] and r["creep_per_dwell_px_max"] <= 2.05
+    # the error trace's outliers are marked, not cut off by a fixed axis
+    assert r["fig7_outliers_marked"] >= r["contour_off_frames"]
+
+
+def _claims_04(r):
+    # "the characterisation ... loses no frame and measures ... with 0.04 px of scatter across it"
+    assert r["characterisation_lost_frames"] == 0 and r["off_axis_rms_px"] < 0.05
+    # "fourth-order branches fit the major loop to 0.4-0.5 px rms, where a straight line is 18 px off"
+    assert 0.35 <= r["rms_major_polynomial_px"] <= 0.55 and round(r["rms_major_linear_px"]) == 18
+    # "on the inner loops the polynomial model is 3.4 px rms off, where the Prandtl-Ishlinskii model ... is
+    # 0.2-0.4 px off"
+    assert round(r["rms_inner_polynomial_px"], 1) in (3.3, 3.4) and 0.2 <= r["rms_inner_pi_px"] <= 0.45
+    # "the open-loop prediction errors are about 2 px rms (120-140 nm) for the paper's model, 0.5-0.6 px (35 nm)
+    # for PI and 16 px for the straight line"
+    assert 1.7 <= r["open_loop_rms_polynomial_px"] <= 2.2 and 110 <= r["open_loop_rms_polynomial_nm"] <= 145
+    assert 0.5 <= r["open_loop_rms_pi_px"] <= 0.6 and round(r["open_loop_rms_linear_px"]) == 16
+    # "The Newton-Raphson inverse returns the voltage for a desired displacement to 1e-12 px"
+    assert r["inverse_round_trip_max_px"] < 1e-11
+
+
+def _claims_05(r):
+    # "The PID alone needs at least five frames to bring the probe within ±1 px of a 100-px step; with feed-forward
+    # the probe is there one or two frames after the step, on every step"
+    assert r["pid_frames_to_1px_min"] >= 5 and r["ff_frames_to_1px_max"] <= 2 and r["ff_faster_than_pid_every_step"]
+    # "The step back to where the characterisation ended is made, not refused"
+    assert r["back_steps_made"] == r["n_steps_per_mode"] // 2 >= 1
+    # "By the ground truth the feed-forward steps are within ±0.5 px by the third frame and end within 0.3 px of
+    # the target, their spread below 0.2 px, far below the paper's 0.46 px; the PID alone ends as close, only later"
+    assert r["ff_true_frames_to_0p5px_max"] <= 3 and r["ff_true_final_error_max_px"] < 0.3
+    assert r["ff_true_final_std_max_px"] < 0.2 and r["pid_true_final_error_max_px"] < 0.3
+    # "The tracker's reading of where a step ended and the truth differ by less than 0.3 px"
+    assert r["ff_tracker_minus_true_final_max_px"] < 0.3
+
+
+def _claims_10(r):
+    # "the angle between the x and y axes comes out at the rig's 97°, within half a degree ... off by about 12 % of
+    # its length (sin 7°)"
+    assert r["axis_angle_rig_deg"] == 97.0 and abs(r["axis_angle_measured_deg"] - 97.0) < 0.5
+    assert round(r["orthogonal_assumption_miss_fraction"], 2) == 0.12
+    # "every move, a single probe's or all four probes' at once, is within ±0.5 px by the ground truth by the sixth
+    # frame; by the truth each ends within 0.5 px of its target"
+    assert r["single_moves"] == 3
+    assert r["single_true_frames_to_0p5px_max"] <= 6 and r["four_true_frames_to_0p5px_max"] <= 6
+    assert r["true_final_error_max_px"] < 0.5
+    # "The tracker reads the ends closer to the targets than they are, by about a tenth of a pixel on average":
+    # about = 0.05-0.3 px
+    assert r["tracker_final_error_max_px"] < r["true_final_error_max_px"]
+    assert 0.05 <= r["tracker_vs_truth_final_error_mean_px"] <= 0.3
+    # "each frame is grabbed once for all of them (four_probe_frames rows per probe, as many frames grabbed)"
+    assert r["four_probe_frames"] == r["four_probe_frames_grabbed"]
+
+
+def _claims_06(r):
+    full = r["n_frames"] == 60
+    # "Every condition now starts from one baseline ... The former table showed that scene three times"
+    assert r["baseline_rows"] == 1 and r["distinct_scenes"] == (7 if full else 4)
+    # "the OpenCV correlators are more precise than semlab's default in most rows (6 of 7; 3 of 4 in fast mode)"
+    assert (r["still_rows_best_peer_beats_semlab"], r["still_rows"]) == ((6, 7) if full else (3, 4))
+    # "semlab's default stays within 0.37 px, under twice the Cramér-Rao bound, while the best OpenCV peer per
+    # scene is 1.9 to 6.7 px off (1.9 to 11 px over fast mode's 24 frames)"
+    assert r["moving_semlab_beats_peers"]
+    assert r["moving_semlab_rmse_max_px"] <= 0.37 and r["moving_semlab_rmse_over_crb_max"] < 2.0
+    lo, hi = (1.9, 6.7) if full else (1.9, 11.0)
+    assert lo <= r["moving_best_peer_rmse_min_px"] and r["moving_best_peer_rmse_max_px"] <= hi
+    # "At 3 pA semlab refuses to start, and says why: ... 72 gray levels of contrast, less than twice the 47.6
+    # gray levels of noise ...; the paper's two trackers ... refuse too. OpenCV's ECC tracks the same frames to
+    # 0.87 px (1.0 px in fast mode)."
+    assert r["semlab_refused_worst_noise"] and "72.1 gray levels" in r["semlab_refusal_reason"]
+    assert "(47.6)" in r["semlab_refusal_reason"] and r["trackers_refused_worst_noise"] == 3
+    assert r["ecc_rmse_worst_noise_px"] == (0.87 if full else 1.02)
+    # "Table and plot show it as a refusal (a cross on the bottom edge)"
+    assert r["missing_points_marked"] >= r["trackers_refused_worst_noise"]
+    # "the paper's contour tracker loses the probe in about a third of the frames (0.37; 0.33 in fast mode) and
+    # semlab's default in none"
+    assert r["contour_loss_occluder"] == (0.37 if full else 0.33) and r["semlab_loss_occluder"] == 0
+
+
+def _claims_07(r):
+    # "The sequence is the 11 motion frames. Reading data/real-sem/contact_brightness_seq/ ... no longer takes the
+    # reference frame for a twelfth frame; that frame now lives in contact_brightness_reference/"
+    assert r["n_frames"] == 11 == r["folder_frames"]
+    assert r["reference_folder"] == "contact_brightness_reference"
+    # "semlab's default follows the needle in every frame ... on frames 1-5 it agrees within 1.2 px with the
+    # needle's displacement measured without it"
+    assert r["ic_lost_frames"] == 0 and r["ic_vs_consensus_max_px_frames_1_5"] <= 1.2
+    # "the needle advances 6.5 to 9.8 px per frame against the 9.6 px commanded, 42 px by frame 5; ... 56 px by
+    # frame 10"
+    assert (r["needle_step_min_px"], r["needle_step_max_px"], r["commanded_step_px"]) == (6.5, 9.8, 9.6)
+    assert round(r["needle_advance_frame_5_px"]) == 42 and round(r["needle_advance_frame_10_px"]) == 56
+    # "The image drifts by up to 2.4 px over the run"
+    assert round(r["drift_max_px"], 1) == 2.4
+    # "The peers that register the whole ROI agree within 3 px with the others on frames 1-2; TM_CCOEFF_NORMED
+    # jumps off through contact, scikit-image's phase correlation from frame 3": agree = within 3 px of the
+    # per-frame median of all trackers, off = more than 20 px from it
+    assert r["ccoeff_dev_before_max_px"] < 3.0 and r["ccoeff_dev_after_max_px"] > 20.0
+    assert r["skimage_dev_before_max_px"] < 3.0 and r["skimage_dev_after_max_px"] > 20.0
+    # "The paper's contour tracker is lost in 5 frames and wild in 4 more (-342 px at frame 8): those values are
+    # marked beyond the axis instead of stretching it"
+    assert r["contour_lost_frames"] == 5 and r["contour_wild_frames"] == 9
+    assert round(r["contour_dx_frame_8_px"]) == -342
+    assert r["needle_outliers_marked"] >= 1 and r["needle_y_axis"][0] > -100.0
+    # "The FEI TIFF's pixel size, 97.66 nm, comes from its metadata. Its contour template now traces the needle
+    # ..., not the landing post's edge"
+    assert r["fei_pixel_size_nm"] == 97.66
+    assert r["fei_contour_right_edge_px"] < r["fei_post_left_edge_px"]
+
+
+CLAIMS = {
+    "00_simulated_rig.ipynb": _claims_00,
+    "01_contour_template.ipynb": _claims_01,
+    "02_repeatability.ipynb": _claims_02,
+    "03_moves_200px.ipynb": _claims_03,
+    "04_hysteresis.ipynb": _claims_04,
+    "05_servo_step.ipynb": _claims_05,
+    "06_robustness.ipynb": _claims_06,
+    "07_real_sem.ipynb": _claims_07,
+    "10_servo_to_point.ipynb": _claims_10,
+}

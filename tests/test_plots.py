@@ -85,3 +85,76 @@ def test_figure_png_renders_without_pyplot():
     fig.subplots().plot([0, 1])
     png = plots.figure_png(fig)
     assert png[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_outlier_fences_are_tukeys_far_out_fences():
+    v = [1, 2, 3, 4, 5, 100]
+    q1, q3 = np.percentile(v, [25, 75])
+    assert plots.outlier_fences(v) == pytest.approx((q1 - 3 * (q3 - q1), q3 + 3 * (q3 - q1)))
+    lo, hi = plots.outlier_fences([0.1, 1, 10, np.nan, -1], log=True)   # decades; NaN and <= 0 ignored
+    assert lo < 0.1 and hi > 10
+    assert np.isnan(plots.outlier_fences([np.nan])[0])
+
+
+def test_robust_ylim_keeps_the_inliers_and_marks_each_outlier_at_its_edge():
+    _, ax = plt.subplots()
+    frames = np.arange(11)
+    y = np.linspace(0, 50, 11)
+    y[8] = -341.0                          # notebook 07's paper-contour frame
+    (line,) = ax.plot(frames, y, "o-")
+    ax.plot(frames, y + 2, "s-")
+    out = plots.robust_ylim(ax, unit=" px")
+    lo, hi = out["limits"]
+    assert lo > -60 and hi < 80           # the axis is not stretched to -341
+    assert lo <= 0 and hi >= 52           # every inlier stays on it
+    assert sorted(out["outliers"]) == [(8.0, -341.0), (8.0, -339.0)]
+    markers = [m for m in ax.get_lines() if m.get_gid() == "semlab-outlier"]
+    assert len(markers) == 2 and markers[0].get_color() == line.get_color()
+    assert markers[0].get_marker() == "v"                      # below the axis: a downward triangle
+    assert markers[0].get_ydata()[0] == pytest.approx(lo)      # drawn on the bottom edge
+    assert any("-341 px" in t.get_text() for t in ax.texts)
+
+
+def test_robust_ylim_without_outliers_changes_nothing_but_the_padding():
+    _, ax = plt.subplots()
+    ax.plot([0, 1, 2], [1.0, 2.0, 3.0])
+    out = plots.robust_ylim(ax, include=[0.0])
+    lo, hi = out["limits"]
+    assert out["outliers"] == [] and lo < 0.0 and hi > 3.0
+
+
+def test_robust_ylim_on_a_log_axis_works_in_decades():
+    _, ax = plt.subplots()
+    ax.loglog([1, 2, 3, 4, 5], [0.1, 0.12, 0.15, 0.2, 500.0], "o-")
+    out = plots.robust_ylim(ax)
+    assert out["outliers"] == [(5.0, 500.0)] and out["limits"][1] < 500
+
+
+def test_mark_missing_draws_nan_points_instead_of_dropping_them():
+    _, ax = plt.subplots()
+    ax.loglog([6.25, 12.5, 25.0], [np.nan, 0.4, 0.16], "o-", label="paper ssd baseline")
+    ax.loglog([6.25, 12.5, 25.0], [0.7, 0.3, 0.16], "o-", label="semlab")
+    out = plots.mark_missing(ax, label="all frames lost")
+    assert out["missing"] == [("paper ssd baseline", 6.25)]
+    (marker,) = out["markers"]
+    assert marker.get_xdata()[0] == 6.25 and marker.get_label() == "all frames lost"
+    assert marker.get_gid() == "semlab-missing"
+    # The marker is in axes coordinates vertically: on the bottom edge whatever the limits.
+    assert 0 <= marker.get_ydata()[0] <= 0.05
+
+
+def test_robust_ylim_labels_only_the_farthest_outliers():
+    _, ax = plt.subplots()
+    y = np.r_[np.linspace(0, 1, 100), np.arange(1, 11) * 100.0]      # 10 outliers, 100 .. 1000
+    ax.plot(np.arange(110), y)
+    out = plots.robust_ylim(ax, max_labels=3)
+    assert len(out["outliers"]) == 10
+    labels = sorted(float(t.get_text()) for t in ax.texts)
+    assert labels == [800.0, 900.0, 1000.0]                 # the three farthest
+
+
+def test_mark_missing_on_a_categorical_axis():
+    _, ax = plt.subplots()
+    ax.semilogy(["baseline", "12.5 pA", "3 pA"], [0.15, 0.28, np.nan], "o-", label="semlab")
+    out = plots.mark_missing(ax)
+    assert out["missing"] == [("semlab", 2.0)]          # "3 pA" is the third category, at x = 2

@@ -64,7 +64,9 @@ def test_fluctuation_and_clutter_probe_still(kind):
     # bound (the displacement carries frame 0's noise once: ~sqrt(2) x bound; see the static test).
     seq = make_sequence(kind, n_frames=50, seed=2, motion="still")
     s = _stats(seq)
-    assert s["loss_rate"] == 0
+    # At most one frame of 50 (2 %, issue 14's target) flagged: where the occluder covers the shaft,
+    # its information is gone and the answer may be reported too uncertain.
+    assert s["loss_rate"] <= 0.02
     assert s["rmse"] <= 2.0 * s["crb"]
 
 
@@ -84,7 +86,9 @@ def test_fluctuation_and_clutter_moving_probe_followed(kind):
     # frame (no error above 2 px, ~20x the bound; a tracker held by the static background,
     # as the 200x200 ROI's clutter holds OpenCV's ECC, would be tens of px off).
     s = _moving_stats(kind)
-    assert s["loss_rate"] == 0
+    # At most 2 of 50 frames (the occluder over the shaft: too uncertain to report) flagged.
+    assert s["loss_rate"] * s["n"] <= 2
+    assert s["max_error"] <= 2.0
 
 
 @pytest.mark.parametrize("seed", [0, 2])
@@ -95,7 +99,7 @@ def test_fluctuation_and_clutter_moving_probe_near_the_bound(kind, seed):
     # sweep the moved ROI's bound is up to 13 % above frame 0's), so 2x leaves ~25 % for the
     # static background's pull (measured, 50 frames: seed 0 1.87x / 1.65x, seed 2 1.81x / 1.79x).
     s = _moving_stats(kind, seed=seed)
-    assert s["loss_rate"] == 0
+    assert s["loss_rate"] * s["n"] <= 2  # the occluder's frames, as above
     assert s["rmse"] <= 2.0 * s["crb"]
 
 
@@ -104,7 +108,7 @@ def test_fluctuation_and_clutter_moving_probe_near_the_bound(kind, seed):
     "and 2.77x on clutter_occluder with the probe moving (seeds 0-5: 1.4-8.2x; seeds 0, 2, 4 within 2x; "
     "seed 1 has a particle touching the apex, seed 3 a thin probe nearly parallel to x). The static "
     "background beside the object pulls the estimate back while the probe is within a few px of where the "
-    "template was taken. A matter for semlab/tracking.py."))
+    "template was taken. A matter for semlab/tracking/."))
 def test_fluctuation_and_clutter_moving_probe_near_the_bound_particle_at_the_apex():
     assert all(_moving_stats(kind, seed=1)["rmse"] <= 2.0 * _moving_stats(kind, seed=1)["crb"]
                for kind in ("gray_fluctuation", "clutter_occluder"))
@@ -149,14 +153,11 @@ def test_roi_from_motion_on_the_rig():
     t.init(frames[-1], (x, y, w, h))  # and the ROI holds a usable contour template
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "known limitation (measured): at low dose (10 pA) a thin probe nearly parallel to x (seed 1) carries "
-    "its x information in the apex only; the fit scatters along the shaft (median error 0.76 px, max 4.62) "
-    "while the score stays normal, so 3 of 30 frames are > 2 px off with ok=True (seed 3: 2, max 2.38). "
-    "A matter for semlab/tracking.py."))
 def test_low_dose_thin_probe_is_followed_or_flagged():
     # Either the tracker follows (error <= 2 px, ~9x this bound) or it says it cannot (ok=False):
-    # no frame may be more than 2 px off while flagged ok.
+    # no frame may be more than 2 px off while flagged ok. At low dose (10 pA) a thin probe nearly
+    # parallel to x (seed 1) carries its x information in the apex only: the fit scatters along the
+    # shaft, which its uncertainty (sigma_x) says; the frames too uncertain to trust are flagged.
     seq = make_sequence("low_dose", n_frames=30, seed=1, motion="still")
     df = track(seq.frames, seq.roi, method="ic", progress=False)
     err = tracking_errors(df, seq.truth, seq.roi)

@@ -288,9 +288,9 @@ def test_noise_model_is_estimated_from_one_image():
 
 def _band_points(img):
     t = identify_contour_template(img)
-    from semlab.tracking import Tracker
+    from semlab.tracking.band import contour_band
 
-    band = Tracker._band(t.mask, 3)
+    band = contour_band(t.mask, 3)
     ys, xs = np.nonzero(band)
     return np.stack([xs, ys], 1).astype(float), t.region[ys, xs]
 

@@ -156,15 +156,56 @@ def test_params_are_accepted_by_the_tracker(explorer):
     assert tracker.contour.area == pytest.approx(explorer.result["area_px"], rel=0.03)
 
 
-def test_roi_from_motion_button_finds_the_moving_disc():
+def test_roi_from_motion_button_puts_the_roi_on_the_frame_it_was_found_on():
     frames = [disc_frame(centre=(60.0 + 8 * k, 75.0)) for k in range(8)]
     ex = TemplateExplorer(frames[0], (0, 0, 60, 60), motion_frames=frames, sigma=0.0)
     ex.controls["roi_size"].value = 100
     ex.controls["motion"].click()
     x, y, w, h = ex.roi
-    # The disc sweeps x = 60..116 at y = 75: the ROI holds the middle of that path.
-    assert x <= 88 <= x + w - 1 and y <= 75 <= y + h - 1
+    # The ROI is found on the last motion frame, where the disc is at x = 60 + 8 * 7 = 116: the explorer
+    # now works on that frame (on frame 0 the disc, at x = 60, would lie half outside the ROI).
+    assert ex.frame_label == "motion frame 7" and ex.motion_index == 7 and np.array_equal(ex.frame, frames[-1])
+    assert x <= 116 - R and 116 + R <= x + w - 1 and y <= 75 - R and 75 + R <= y + h - 1
     assert ex.controls["click_x"].value == round(x + (w - 1) / 2)
+    # The template is the disc's outline in that frame, centred on the disc; its area pi R^2 within one px
+    # of boundary position (contour points sit on pixel centres), as in the threshold tests above.
+    assert ex.result["ok"] and abs(ex.result["area_px"] - math.pi * R * R) < 2 * math.pi * R * 1.0
+    cx, cy = ex.result["template"].points.reshape(-1, 2).mean(axis=0) + (x, y)
+    assert (cx, cy) == pytest.approx((116.0, 75.0), abs=1.0)
+    assert "motion frame 7" in ex.readout.value
+
+
+def test_roi_from_motion_on_the_rig_holds_the_tip_in_its_frame():
+    """Notebook 01's motion search: the template is the probe's outline around the true tip."""
+    from semlab.sim import SimulatedRig
+
+    rig = SimulatedRig(n_manipulators=4, pixel_size_nm=66.0, seed=0)
+    frame = rig.microscope.grab()
+    axis = rig.axis(0, "x")
+    motion, tips = [], []
+    for k in range(10):
+        axis.apply(axis.limits[0] + 3.0 * k)
+        motion.append(rig.microscope.grab())
+        tips.append(rig.truth.query("probe == 0")[["x", "y"]].to_numpy()[0])
+    ex = TemplateExplorer(frame, roi_size=200, motion_frames=motion)
+    ex.controls["motion"].click()
+    x, y, w, h = ex.roi
+    tx, ty = tips[-1]
+    assert ex.frame_label == "motion frame 9" and x <= tx <= x + w - 1 and y <= ty <= y + h - 1
+    contour = ex.result["template"].points.reshape(-1, 1, 2).astype(np.float32)
+    # The tip is on the outline: within the render's edge blur plus the smoothing (a few px) of it.
+    assert abs(cv2.pointPolygonTest(contour, (tx - x, ty - y), True)) < 4.0
+    tip0 = ex.result["template"]   # the same template as a click at the tip of that frame gives
+    direct = explore_template(motion[-1], ex.roi, **ex.params)["template"]
+    assert tip0.area == direct.area and tip0.length == direct.length
+
+
+def test_roi_from_motion_refusal_is_shown_not_raised():
+    still = [disc_frame() for _ in range(5)]
+    ex = TemplateExplorer(still[0], ROI, motion_frames=still, sigma=0.0)
+    ex.controls["motion"].click()
+    assert ex.roi == ROI and ex.frame_label == "frame"
+    assert "no motion" in ex.motion_error and "refused" in ex.readout.value
 
 
 def test_explore_template_matches_the_explorer(explorer):

@@ -1,4 +1,8 @@
-"""Cramér–Rao bound of the probe's 2-D translation from one simulated frame.
+"""Cramér–Rao bound of the probe's 2-D translation from one frame.
+
+:func:`fisher_information` takes any clean render ``m(t)`` and per-pixel noise model (the
+semi-real composites of :mod:`semlab.sim.composite` use it with their own);
+:func:`translation_fisher` / :func:`translation_crb` apply it to :class:`SimulatedSEM`.
 
 For a frame ``I = m(theta) + n`` with Gaussian noise of covariance ``C``, the Fisher
 information of the parameters ``theta`` is ``F = J^T C^-1 J`` with ``J = dm/dtheta``
@@ -29,7 +33,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["check_roi", "translation_crb", "translation_fisher"]
+__all__ = ["check_roi", "crb_from_fisher", "fisher_information", "sem_has_photometric_nuisance",
+           "translation_crb", "translation_fisher"]
 
 
 def check_roi(roi, width: int, height: int):
@@ -47,63 +52,68 @@ def check_roi(roi, width: int, height: int):
     return x, y, w, h
 
 
-def translation_fisher(sem, tips, roi, probe=0, *, t=None, h=1e-2, nuisance="auto"):
-    """Fisher information matrix of ``(t_x, t_y[, gain, offset])`` for one frame's ROI.
+def fisher_information(render, white_variance, roi, *, nuisance=False, black_level=0.0,
+                       line_correlation=0.0, line_offset_gray=0.0, line_jitter_px=0.0, h=1e-2):
+    """Fisher information of a translation from one frame, for any clean render and noise model.
 
-    Parameters are those of :func:`translation_crb`.
+    The frame is ``I = m(t) + n``: ``m`` the noise-free image with the object translated by
+    ``t = (t_x, t_y)`` px, ``n`` Gaussian (or Poisson, see the module docstring) noise whose
+    covariance is a per-pixel white variance, optionally filtered along the scan line by an
+    AR(1) process and with per-line offsets and jitter (the rank-2 row terms of the module
+    docstring). ``F = J^T C^-1 J`` over the pixels of ``roi``.
+
+    Parameters
+    ----------
+    render : callable ``(dx, dy) -> (H, W) ndarray``
+        The clean image with the object translated by ``(dx, dy)`` px from where the bound is
+        wanted; ``render(0, 0)`` is ``m``. ``J`` is its central difference at ``+-h``.
+    white_variance : (H, W) ndarray or callable ``m -> (H, W) ndarray``
+        Variance of the white part of the noise per pixel (before the line filter), e.g. shot
+        noise ``g_e (m - black)`` + read noise + quantisation.
+    roi : (x, y, w, h)
+        Pixels that the estimator uses (inside the frame).
+    nuisance : bool
+        Also estimate the frame's gain and offset (columns ``m - black_level`` and 1).
+    black_level : float
+        Gray level of zero signal (the gain multiplies ``m - black_level``).
+    line_correlation, line_offset_gray, line_jitter_px : float
+        AR(1) coefficient along x, per-line offset std (gray levels) and per-line horizontal
+        jitter std (px).
+    h : float
+        Step (px) of the central difference.
 
     Returns
     -------
     (p, p) ndarray
-        Fisher matrix; the first two parameters are the translation in px.
+        Fisher matrix of ``(t_x, t_y[, gain, offset])``.
     """
-    tips = sem._check_tips(tips)
-    if isinstance(probe, bool) or not isinstance(probe, (int, np.integer)) or not 0 <= probe < len(tips):
-        raise ValueError(f"probe {probe!r} is not one of the {len(tips)} tips")
-    x0, y0, w, hh = check_roi(roi, sem.width, sem.height)
-    tx, ty = tips[probe]
-    if not (0 <= tx <= sem.width - 1 and 0 <= ty <= sem.height - 1):
-        raise ValueError(f"probe {probe}'s tip ({tx:.1f}, {ty:.1f}) px is off the "
-                         f"{sem.width}x{sem.height} frame")
     if not h > 0:
         raise ValueError("h must be > 0")
-    nz = sem.noise
-    t = sem.time if t is None else float(t)
-
-    def render(dx, dy):
-        tt = tips.copy()
-        tt[probe] += (dx, dy)
-        return sem.render_clean(tt, t=t)
-
-    m = render(0.0, 0.0)
-    jx = (render(h, 0.0) - render(-h, 0.0)) / (2 * h)
-    jy = (render(0.0, h) - render(0.0, -h)) / (2 * h)
-
-    # white variance per pixel (whole frame, for the stationary start of each row)
-    white = np.full(m.shape, nz.read_noise_gray**2 + sem.quantisation_variance)
-    if nz.shot_noise:
-        g_e = sem.gain_gray_per_electron
-        white = white + g_e * np.maximum(m - nz.brightness, 0.0)
+    m = np.asarray(render(0.0, 0.0), float)
+    height, width = m.shape
+    x0, y0, w, hh = check_roi(roi, width, height)
+    jx = (np.asarray(render(h, 0.0), float) - np.asarray(render(-h, 0.0), float)) / (2 * h)
+    jy = (np.asarray(render(0.0, h), float) - np.asarray(render(0.0, -h), float)) / (2 * h)
+    white = white_variance(m) if callable(white_variance) else np.asarray(white_variance, float)
+    if white.shape != m.shape:
+        raise ValueError(f"white_variance has shape {white.shape}, the frame {m.shape}")
     if not np.all(white > 0):
         raise ValueError("the noise model has zero variance somewhere: the bound is infinite")
 
     cols = [jx, jy]
-    if nuisance == "auto":
-        nuisance = (nz.gain_fluctuation > 0 or nz.offset_fluctuation_gray > 0
-                    or nz.charging_amplitude > 0)
     if nuisance:
-        cols += [m - nz.brightness, np.ones_like(m)]
+        cols += [m - black_level, np.ones_like(m)]
     sl = (slice(y0, y0 + hh), slice(x0, x0 + w))
     J = np.stack([c[sl] for c in cols], axis=-1)  # (hh, w, p)
     D = white[sl]
-    rho = nz.line_correlation
+    rho = float(line_correlation)
 
     rank = []
-    if nz.line_offset_gray > 0:
-        rank.append((np.ones((hh, w)), nz.line_offset_gray**2))
-    if nz.line_jitter_px > 0:
+    if line_offset_gray > 0:
+        rank.append((np.ones((hh, w)), line_offset_gray**2))
+    if line_jitter_px > 0:
         gx = np.gradient(m, axis=1)[sl]
-        rank.append((gx, nz.line_jitter_px**2))
+        rank.append((gx, line_jitter_px**2))
 
     if rho > 0:
         # stationary variance of the first ROI pixel of each row: sum_k h_k^2 D[x0 - k]
@@ -135,7 +145,69 @@ def translation_fisher(sem, tips, roi, probe=0, *, t=None, h=1e-2, nuisance="aut
     return F
 
 
-def translation_crb(sem, tips, roi, probe=0, *, t=None, h=1e-2, nuisance="auto"):
+def crb_from_fisher(F) -> tuple[float, float]:
+    """``(sigma_x, sigma_y)`` px: the translation's bound from a Fisher matrix (nuisances marginalised).
+
+    ``inf`` when the matrix is singular (the translation cannot be estimated).
+    """
+    try:
+        cov = np.linalg.inv(np.asarray(F, float))
+    except np.linalg.LinAlgError:
+        return float("inf"), float("inf")
+    var = np.diag(cov)[:2]
+    if np.any(var <= 0) or not np.all(np.isfinite(var)):
+        return float("inf"), float("inf")
+    return float(np.sqrt(var[0])), float(np.sqrt(var[1]))
+
+
+def sem_has_photometric_nuisance(noise) -> bool:
+    """Whether a :class:`SEMNoise` changes the frame's gain/offset (fluctuation, jitter or charging)."""
+    return (noise.gain_fluctuation > 0 or noise.offset_fluctuation_gray > 0
+            or noise.gain_jitter > 0 or noise.offset_jitter_gray > 0 or noise.charging_amplitude > 0)
+
+
+def translation_fisher(sem, tips, roi, probe=0, *, t=None, h=1e-2, nuisance="auto", charge=1.0):
+    """Fisher information matrix of ``(t_x, t_y[, gain, offset])`` for one frame's ROI.
+
+    Parameters are those of :func:`translation_crb`.
+
+    Returns
+    -------
+    (p, p) ndarray
+        Fisher matrix; the first two parameters are the translation in px.
+    """
+    tips = sem._check_tips(tips)
+    if isinstance(probe, bool) or not isinstance(probe, (int, np.integer)) or not 0 <= probe < len(tips):
+        raise ValueError(f"probe {probe!r} is not one of the {len(tips)} tips")
+    check_roi(roi, sem.width, sem.height)
+    tx, ty = tips[probe]
+    if not (0 <= tx <= sem.width - 1 and 0 <= ty <= sem.height - 1):
+        raise ValueError(f"probe {probe}'s tip ({tx:.1f}, {ty:.1f}) px is off the "
+                         f"{sem.width}x{sem.height} frame")
+    nz = sem.noise
+    t = sem.time if t is None else float(t)
+
+    def render(dx, dy):
+        tt = tips.copy()
+        tt[probe] += (dx, dy)
+        return sem.render_clean(tt, t=t, charge=charge)
+
+    def white(m):
+        # white variance per pixel (whole frame, for the stationary start of each row)
+        var = np.full(m.shape, nz.read_noise_gray**2 + sem.quantisation_variance)
+        if nz.shot_noise:
+            var = var + sem.gain_gray_per_electron * np.maximum(m - nz.brightness, 0.0)
+        return var
+
+    if nuisance == "auto":
+        nuisance = sem_has_photometric_nuisance(nz)
+    return fisher_information(render, white, roi, nuisance=bool(nuisance), black_level=nz.brightness,
+                              line_correlation=nz.line_correlation,
+                              line_offset_gray=nz.line_offset_gray,
+                              line_jitter_px=nz.line_jitter_px, h=h)
+
+
+def translation_crb(sem, tips, roi, probe=0, *, t=None, h=1e-2, nuisance="auto", charge=1.0):
     """Cramér–Rao bound of the probe's translation estimated from ONE frame's ROI.
 
     Parameters
@@ -155,7 +227,10 @@ def translation_crb(sem, tips, roi, probe=0, *, t=None, h=1e-2, nuisance="auto")
         trades round-off against the O(h^2) truncation).
     nuisance : bool or "auto"
         Also estimate the frame's gain and offset (the paper's gray-level fluctuation);
-        "auto" = when the noise model has gain/offset fluctuation or charging.
+        "auto" = when the noise model has gain/offset fluctuation or jitter, or charging.
+    charge : float
+        Charging factor of the probes in this frame (``sem.noise.charging_factor(t)`` for a
+        frame that :meth:`SimulatedSEM.acquire` scanned at ``t``; 1 = uncharged).
 
     Returns
     -------
@@ -173,12 +248,5 @@ def translation_crb(sem, tips, roi, probe=0, *, t=None, h=1e-2, nuisance="auto")
     -----
     See the module docstring for exactly what the bound assumes.
     """
-    F = translation_fisher(sem, tips, roi, probe, t=t, h=h, nuisance=nuisance)
-    try:
-        cov = np.linalg.inv(F)
-    except np.linalg.LinAlgError:
-        return float("inf"), float("inf")
-    var = np.diag(cov)[:2]
-    if np.any(var <= 0) or not np.all(np.isfinite(var)):
-        return float("inf"), float("inf")
-    return float(np.sqrt(var[0])), float(np.sqrt(var[1]))
+    return crb_from_fisher(translation_fisher(sem, tips, roi, probe, t=t, h=h, nuisance=nuisance,
+                                              charge=charge))

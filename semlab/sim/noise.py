@@ -13,8 +13,11 @@ Signal chain for one frame, in the order the instrument applies it:
    an AR(1) process along x with coefficient ``line_correlation`` (variance preserved).
 4. Each scan line gets a random offset (``line_offset_gray``) and a random horizontal
    position error (``line_jitter_px``, applied to the scene coordinates).
-5. Per frame, gain and offset wander (AR(1) across frames): gray-level fluctuation.
-   The probe charges up, its brightness rising as ``1 + A (1 - exp(-t / tau))``.
+5. Per frame, gain and offset wander (AR(1) across frames): gray-level fluctuation; on top,
+   optional independent jumps uniform in ``+-gain_jitter`` and ``+-offset_jitter_gray`` (an
+   auto-contrast that re-adjusts every frame). The probe charges up, its brightness rising as
+   ``1 + A (1 - exp(-t / tau))``; the substrate does not charge, and the edge brightening
+   (a topographic effect) scales with the charging only if ``charging_scales_rim``.
 6. The whole image drifts slowly (stage/beam drift); the probe truth includes it.
 7. The frame grabber rounds and clips to 8 bits (quantisation variance 1/12).
 """
@@ -72,10 +75,19 @@ class SEMNoise:
         Standard deviation of the per-frame offset.
     fluctuation_memory : float
         Frame-to-frame AR(1) coefficient of the gain/offset fluctuation, in [0, 1).
+    gain_jitter : float
+        Independent per-frame relative gain jump, uniform in ``[-gain_jitter, gain_jitter]``
+        (on top of ``gain_fluctuation``); 0: off.
+    offset_jitter_gray : float
+        Independent per-frame offset jump, uniform in ``+-offset_jitter_gray`` gray levels.
     charging_amplitude : float
         Relative brightness increase of the probes when fully charged.
     charging_time_s : float
         Time constant of the charging.
+    charging_scales_rim : bool
+        Whether the edge brightening (rim) brightens with the charging like the probe's body
+        (True, the historical model) or stays as it is (False: the rim is topographic contrast,
+        the charging a change of the body's surface potential).
     drift_px_per_s : float
         Speed of the slow image drift.
     drift_angle_deg : float or None
@@ -103,8 +115,11 @@ class SEMNoise:
     gain_fluctuation: float = 0.02
     offset_fluctuation_gray: float = 2.0
     fluctuation_memory: float = 0.9
+    gain_jitter: float = 0.0
+    offset_jitter_gray: float = 0.0
     charging_amplitude: float = 0.08
     charging_time_s: float = 20.0
+    charging_scales_rim: bool = True
     drift_px_per_s: float = 0.05
     drift_angle_deg: float | None = None
 
@@ -125,6 +140,8 @@ class SEMNoise:
             raise ValueError("SEMNoise.dwell_time_s must be > 0")
         if not 0 < self.scan_efficiency <= 1:
             raise ValueError(f"SEMNoise.scan_efficiency must lie in (0, 1], got {self.scan_efficiency}")
+        if self.gain_jitter >= 1:
+            raise ValueError(f"SEMNoise.gain_jitter must lie in [0, 1), got {self.gain_jitter}")
         for name in ("line_correlation", "fluctuation_memory"):
             if not 0 <= getattr(self, name) < 1:
                 raise ValueError(f"SEMNoise.{name} must lie in [0, 1), got {getattr(self, name)}")

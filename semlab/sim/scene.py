@@ -59,6 +59,10 @@ class ProbeGeometry:
         Relative brightness difference across the shaft, from its right-hand side
         (facing the Everhart-Thornley detector) to its left-hand side: the body's yield
         is ``brightness * (1 + shading * s)`` with ``s`` in [-1, 1] across the shaft.
+    shape : semlab.sim.shapes.ProbeShape or None
+        Another outline (blunt tip, gripper jaws, AFM-like tip; :mod:`semlab.sim.shapes`)
+        instead of the tapered probe; ``tip_diameter_nm`` and ``half_angle_deg`` are then
+        unused. ``None``: the tapered probe with a rounded tip.
     """
 
     tip_diameter_nm: float = 200.0
@@ -67,6 +71,7 @@ class ProbeGeometry:
     rim_amplitude: float = 0.3
     rim_width_nm: float = 50.0
     shading: float = 0.15
+    shape: object = None
 
     def __post_init__(self):
         if not self.tip_diameter_nm > 0:

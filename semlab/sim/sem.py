@@ -21,6 +21,7 @@ from .scene import (
     render_disc,
     render_probe,
 )
+from .shapes import render_shape
 
 __all__ = ["SimulatedSEM"]
 
@@ -54,6 +55,11 @@ class SimulatedSEM:
     dtype : numpy dtype
         Output of :meth:`acquire`: uint8 (default, 0-255 gray levels), uint16 (same
         scale x 257), float32/float64 (no rounding or clipping).
+    background : (height, width) ndarray or None
+        The static background in yield units (e.g. from
+        :func:`semlab.sim.substrate.textured_substrate`) instead of
+        :func:`semlab.sim.scene.make_substrate`'s; ``clutter.texture`` and
+        ``clutter.n_static`` are then unused.
 
     Notes
     -----
@@ -65,7 +71,7 @@ class SimulatedSEM:
     def __init__(self, width=640, height=480, pixel_size_nm=66.0, frame_period=1 / 13,
                  noise: SEMNoise | None = None, clutter: Clutter | None = None,
                  probe: ProbeGeometry | None = None, seed=0, beam_sigma_px=None,
-                 probe_angles_deg=None, dtype=np.uint8):
+                 probe_angles_deg=None, dtype=np.uint8, background=None):
         for name, v in (("width", width), ("height", height)):
             if int(v) != v or v < 16:
                 raise ValueError(f"{name} must be an integer >= 16, got {v!r}")
@@ -109,8 +115,15 @@ class SimulatedSEM:
 
         scene_rng = np.random.default_rng([seed, 1])
         self._rng = np.random.default_rng([seed, 2])
-        self._background = make_substrate(self.width, self.height, self.clutter,
-                                          self.beam_sigma_px, scene_rng)
+        if background is None:
+            self._background = make_substrate(self.width, self.height, self.clutter,
+                                              self.beam_sigma_px, scene_rng)
+        else:
+            bg = np.asarray(background, dtype=np.float32)
+            if bg.shape != (self.height, self.width) or not np.all(np.isfinite(bg)):
+                raise ValueError(f"background must be a finite ({self.height}, {self.width}) "
+                                 f"yield image, got shape {bg.shape}")
+            self._background = bg.copy()
         self._drifters = self._make_drifters(scene_rng)
         if self.noise.drift_angle_deg is None:
             self._drift_angle = float(scene_rng.uniform(0, 2 * math.pi))
@@ -210,10 +223,16 @@ class SimulatedSEM:
         g = self.probe
         r_tip = self.tip_radius_px
         half = math.radians(g.half_angle_deg)
+        rim = g.rim_amplitude * (charge if self.noise.charging_scales_rim else 1.0)
         for i, tip in enumerate(tips):
-            render_probe(img, tip, math.radians(self.probe_angles_deg[i]), r_tip, half, sigma,
-                         g.brightness * charge, g.rim_amplitude * charge, self.rim_width_px,
-                         row_shift=row_shift, shading=g.shading)
+            angle = math.radians(self.probe_angles_deg[i])
+            if g.shape is not None:
+                render_shape(img, g.shape, tip, angle, self.pixel_size_nm, sigma,
+                             g.brightness * charge, rim, self.rim_width_px, row_shift=row_shift,
+                             shading=g.shading)
+                continue
+            render_probe(img, tip, angle, r_tip, half, sigma, g.brightness * charge, rim,
+                         self.rim_width_px, row_shift=row_shift, shading=g.shading)
         occ = self.occluder_position(t)
         if occ is not None:
             blur = math.hypot(sigma, self.clutter.occluder_blur_px)
@@ -221,7 +240,7 @@ class SimulatedSEM:
                         rim_amp=0.1, rim_w_px=2.0, row_shift=row_shift)
         return img
 
-    def render_clean(self, tips, t=None) -> np.ndarray:
+    def render_clean(self, tips, t=None, *, charge=1.0) -> np.ndarray:
         """Noise-free expected frame in gray levels, probes exactly at ``tips``.
 
         Parameters
@@ -230,16 +249,21 @@ class SimulatedSEM:
             Tip positions ``(x, y)`` in px of probes ``0..n-1`` (may lie off the frame).
         t : float or None
             Time for the moving clutter; ``None`` = mid-time of the next frame.
+        charge : float
+            Charging factor of the probes (``noise.charging_factor(t)`` for the frame
+            :meth:`acquire` scans at ``t``); 1 = uncharged.
 
         Returns
         -------
         (H, W) ndarray of float64
-            ``brightness + contrast * yield`` (:attr:`contrast`): no noise, drift, jitter, charging,
+            ``brightness + contrast * yield`` (:attr:`contrast`): no noise, drift, jitter,
             gain/offset fluctuation or quantisation.
         """
         tips = self._check_tips(tips)
         t = self.time if t is None else float(t)
-        y = self._render_yield(tips, t, dtype=np.float64)
+        if not (np.isfinite(charge) and charge > 0):
+            raise ValueError(f"charge must be a positive factor, got {charge!r}")
+        y = self._render_yield(tips, t, charge=float(charge), dtype=np.float64)
         return self.noise.brightness + self.contrast * y
 
     def acquire(self, tips) -> np.ndarray:
@@ -274,6 +298,11 @@ class SimulatedSEM:
         self._offset_state = m * self._offset_state + innov * rng.standard_normal()
         gain = 1.0 + nz.gain_fluctuation * self._gain_state
         offset = nz.offset_fluctuation_gray * self._offset_state
+        # independent per-frame jumps (drawn only when on: sequences without them are unchanged)
+        if nz.gain_jitter > 0:
+            gain *= 1.0 + rng.uniform(-nz.gain_jitter, nz.gain_jitter)
+        if nz.offset_jitter_gray > 0:
+            offset += rng.uniform(-nz.offset_jitter_gray, nz.offset_jitter_gray)
 
         g_e = self.gain_gray_per_electron
         need_noise = nz.shot_noise or nz.read_noise_gray > 0

@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from ..roi import clip_window
 from .crb import translation_crb
 from .noise import SEMNoise
 from .rig import SimulatedRig, default_hysteresis
@@ -69,8 +70,8 @@ class Sequence:
         estimate in ``roi`` (:func:`semlab.sim.translation_crb`), computed for FRAME 0
         (the probe at rest where the ROI was taken). When the probe moves, later frames
         see the same probe over another patch of background: the bound of the ROI moved
-        with the probe differs slightly (along the default sweep, seed 0: 1.00-1.13 x
-        frame 0's in x; the probe's edges carry most of the information).
+        with the probe differs slightly (the probe's edges carry most of the information;
+        ``benchmarks/bench_tracking.py`` states by how much along the default sweep).
     meta : dict
         ``kind``, ``seed``, ``pixel_size_nm``, ``frame_period``, ``noise``, ``clutter``
         (parameter dicts), ``motion`` (``"still"``, ``"steps"`` for ``"moves_200px"``,
@@ -235,6 +236,35 @@ def make_sequence(kind: str, n_frames: int | None = None, seed: int = 0, **overr
     if n_frames is not None and (int(n_frames) != n_frames or n_frames < 1):
         raise ValueError(f"n_frames must be a positive integer, got {n_frames!r}")
 
+    noise, clutter, seq_opts, rig_kwargs = _split_overrides(kind, overrides)
+    roi_size = int(seq_opts.get("roi_size", 200))
+    motion, sweep = _check_motion(kind, seq_opts)
+    if kind == "clutter_occluder" and clutter.occluder and clutter.occluder_path is None:
+        clutter = _occluder_behind_the_tip(clutter, seed, motion, sweep, rig_kwargs)
+
+    rig = SimulatedRig(seed=seed, noise=noise, clutter=clutter, **rig_kwargs)
+    sem = rig.sem
+    if roi_size > min(sem.width, sem.height):
+        raise ValueError(f"roi_size {roi_size} does not fit in the {sem.width}x{sem.height} frame")
+    schedule, n_frames, meta_kind = _voltage_schedule(kind, motion, sweep, seq_opts, rig, seed, n_frames)
+    frames, us, truth_all, tips0, t0 = _simulate(rig, schedule, n_frames, kind, bool(seq_opts.get("progress", False)))
+    truth = truth_all[truth_all["probe"] == 0].drop(columns="probe").reset_index(drop=True)
+    roi = _roi_around(tips0[0], roi_size, sem)
+    crb = translation_crb(sem, tips0, roi, probe=0, t=t0)
+
+    meta = dict(kind=kind, seed=seed, n_frames=n_frames, pixel_size_nm=sem.pixel_size_nm,
+                frame_period=sem.frame_period, width=sem.width, height=sem.height,
+                dose_e_per_px=sem.dose, beam_sigma_px=sem.beam_sigma_px,
+                noise=noise.as_dict(), clutter=dataclasses.asdict(clutter),
+                n_manipulators=rig.n_manipulators, **meta_kind)
+    commands = pd.DataFrame({"frame": np.arange(n_frames), "u": us})
+    return Sequence(frames=frames, truth=truth, roi=roi, crb=crb, meta=meta,
+                    truth_all=truth_all, commands=commands)
+
+
+def _split_overrides(kind, overrides):
+    """``(noise, clutter, sequence options, rig keywords)``: the kind's defaults with the overrides."""
+    overrides = dict(overrides)
     noise, clutter = _kind_defaults(kind)
     if "noise" in overrides:
         noise = overrides.pop("noise")
@@ -247,36 +277,32 @@ def make_sequence(kind: str, n_frames: int | None = None, seed: int = 0, **overr
     if cl_changes:
         clutter = dataclasses.replace(clutter, **cl_changes)
     seq_opts = {k: overrides.pop(k) for k in list(overrides) if k in _SEQ_KEYS}
-    roi_size = int(seq_opts.get("roi_size", 200))
-    progress = bool(seq_opts.get("progress", False))
-    motion, sweep = _check_motion(kind, seq_opts)
+    return noise, clutter, seq_opts, overrides
 
-    # the occluder passes over probe 0's shaft 45 px behind its tip (behind where the tip is
-    # planned to be when the occluder crosses, for a sweeping probe)
-    rig_probe_kwargs = dict(overrides)
-    if kind == "clutter_occluder" and clutter.occluder and clutter.occluder_path is None:
-        probe_rig = SimulatedRig(seed=seed, noise=SEMNoise.off(), clutter=Clutter.none(),
-                                 **{k: v for k, v in rig_probe_kwargs.items() if k != "dtype"})
-        tip = probe_rig.base_positions[0]
-        ang = math.radians(probe_rig.sem.probe_angles_deg[0])
-        d = np.array([math.cos(ang), math.sin(ang)])
-        perp = np.array([-d[1], d[0]])
-        period_s = 2 * 150 * 2 / 40.0  # ~40 px/s; a pass takes ~7.5 s
-        if motion == "sweep":
-            # it crosses the middle of its path a quarter period in: frame (t / T) - 1/2
-            k_cross = int(period_s / 4 / probe_rig.sem.frame_period - 0.5)
-            tip = tip + _sweep_displacement_px(probe_rig, seed, *sweep, k_cross)
-        p = tip - 45.0 * d
-        clutter = dataclasses.replace(
-            clutter, occluder_path=(tuple(p - 150 * perp), tuple(p + 150 * perp)),
-            occluder_period_s=period_s)
 
-    rig = SimulatedRig(seed=seed, noise=noise, clutter=clutter, **overrides)
+def _occluder_behind_the_tip(clutter, seed, motion, sweep, rig_kwargs):
+    """The occluder's path across probe 0's shaft, 45 px behind its tip (behind where the tip is
+    planned to be when the occluder crosses, for a sweeping probe)."""
+    probe_rig = SimulatedRig(seed=seed, noise=SEMNoise.off(), clutter=Clutter.none(),
+                             **{k: v for k, v in rig_kwargs.items() if k != "dtype"})
+    tip = probe_rig.base_positions[0]
+    ang = math.radians(probe_rig.sem.probe_angles_deg[0])
+    d = np.array([math.cos(ang), math.sin(ang)])
+    perp = np.array([-d[1], d[0]])
+    period_s = 2 * 150 * 2 / 40.0  # ~40 px/s; a pass takes ~7.5 s
+    if motion == "sweep":
+        # it crosses the middle of its path a quarter period in: frame (t / T) - 1/2
+        k_cross = int(period_s / 4 / probe_rig.sem.frame_period - 0.5)
+        tip = tip + _sweep_displacement_px(probe_rig, seed, *sweep, k_cross)
+    p = tip - 45.0 * d
+    return dataclasses.replace(clutter, occluder_path=(tuple(p - 150 * perp), tuple(p + 150 * perp)),
+                               occluder_period_s=period_s)
+
+
+def _voltage_schedule(kind, motion, sweep, seq_opts, rig, seed, n_frames):
+    """Manipulator 0's x-axis voltage per frame (None: untouched), the number of frames and the
+    kind's entries of ``meta``."""
     sem = rig.sem
-    if roi_size > min(sem.width, sem.height):
-        raise ValueError(f"roi_size {roi_size} does not fit in the {sem.width}x{sem.height} frame")
-
-    # voltage schedule of manipulator 0's x axis
     if kind == "moves_200px":
         step_px = float(seq_opts.get("step_px", 200.0))
         n_cycles = int(seq_opts.get("n_cycles", 5))
@@ -293,21 +319,23 @@ def make_sequence(kind: str, n_frames: int | None = None, seed: int = 0, **overr
             n_frames = len(schedule)
         while len(schedule) < n_frames:
             schedule += cycle
-        schedule = schedule[:n_frames]
         meta_kind = {"motion": motion, "step_px": step_px, "u_A": 0.0, "u_B": u_b,
                      "n_cycles": n_cycles, "move_frames": move, "dwell_frames": dwell}
-    elif motion == "sweep":
-        n_frames = 100 if n_frames is None else int(n_frames)
+        return schedule[:n_frames], n_frames, meta_kind
+    n_frames = 100 if n_frames is None else int(n_frames)
+    if motion == "sweep":
         amp, period = sweep
         u_peak = _sweep_peak_voltage(rig, seed, amp)
         schedule = list(_sweep_voltages(u_peak, period, np.arange(n_frames)))
-        meta_kind = {"motion": motion, "sweep_amplitude_px": amp, "sweep_period_frames": period,
-                     "u_peak": u_peak}
-    else:
-        n_frames = 100 if n_frames is None else int(n_frames)
-        schedule = None
-        meta_kind = {"motion": motion}
+        return schedule, n_frames, {"motion": motion, "sweep_amplitude_px": amp, "sweep_period_frames": period,
+                                    "u_peak": u_peak}
+    return None, n_frames, {"motion": motion}
 
+
+def _simulate(rig, schedule, n_frames, kind, progress):
+    """Grab ``n_frames`` frames, applying the schedule: ``frames, commands, truth of all probes,
+    the tips in frame 0 and frame 0's time``."""
+    sem = rig.sem
     frames = np.empty((n_frames, sem.height, sem.width), dtype=sem.dtype)
     ax = rig.axis(0, "x")
     us = np.zeros(n_frames)
@@ -325,25 +353,13 @@ def make_sequence(kind: str, n_frames: int | None = None, seed: int = 0, **overr
         if k == 0:
             tips0 = rig.truth[["x", "y"]].to_numpy()
             t0 = float(rig.truth["t"].iloc[0])
-    truth_all = pd.concat(truths, ignore_index=True)
-    truth = truth_all[truth_all["probe"] == 0].drop(columns="probe").reset_index(drop=True)
+    return frames, us, pd.concat(truths, ignore_index=True), tips0, t0
 
-    tx, ty = tips0[0]
+
+def _roi_around(tip, roi_size, sem):
+    """The ``roi_size`` ROI around probe 0's tip in frame 0, shifted to lie inside the frame."""
+    tx, ty = tip
     if not (0 <= tx <= sem.width - 1 and 0 <= ty <= sem.height - 1):
         raise ValueError(f"probe 0's tip ({tx:.1f}, {ty:.1f}) px is off the {sem.width}x{sem.height} "
                          "frame in frame 0; check base_positions")
-    rx = round(tx - (roi_size - 1) / 2)
-    ry = round(ty - (roi_size - 1) / 2)
-    rx = min(max(rx, 0), sem.width - roi_size)
-    ry = min(max(ry, 0), sem.height - roi_size)
-    roi = (rx, ry, roi_size, roi_size)
-    crb = translation_crb(sem, tips0, roi, probe=0, t=t0)
-
-    meta = dict(kind=kind, seed=seed, n_frames=n_frames, pixel_size_nm=sem.pixel_size_nm,
-                frame_period=sem.frame_period, width=sem.width, height=sem.height,
-                dose_e_per_px=sem.dose, beam_sigma_px=sem.beam_sigma_px,
-                noise=noise.as_dict(), clutter=dataclasses.asdict(clutter),
-                n_manipulators=rig.n_manipulators, **meta_kind)
-    commands = pd.DataFrame({"frame": np.arange(n_frames), "u": us})
-    return Sequence(frames=frames, truth=truth, roi=roi, crb=crb, meta=meta,
-                    truth_all=truth_all, commands=commands)
+    return clip_window(tx, ty, roi_size, roi_size, (sem.height, sem.width))

@@ -1,0 +1,420 @@
+"""The registration band and the template model built on it (offline, once per template).
+
+The band is the set of template pixels within a few px of the contour template (paper, Fig. 1c):
+nearly all the positional information of a probe is at its edges. :func:`band_widths` says how
+far it reaches on each side, :func:`registration_band` draws it, and :class:`BandModel` holds
+everything the per-frame registration needs from the template at the band's pixels, computed
+once: the whitened template and its gradients (the Jacobian, the paper's offline matrix ``M₀``
+of eqs. 4-5) at full resolution and at each smoothed level, the noise weights, the object/
+background split, the background tiles and the Gauss–Newton constants.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from skimage.restoration import denoise_nl_means
+
+from ..subpixel import MAD_TO_SD, NoiseModel, five_point_gradients, gauss_newton_setup, whiten_lines
+from ..template import ContourTemplate
+from .options import BandOptions, TrackerOptions
+
+__all__ = [
+    "DEFAULT_BAND_PX",
+    "DENOISE_FROM_FRAMES",
+    "MIN_BAND_PIXELS",
+    "NARROW_BAND_TEXTURE",
+    "BandModel",
+    "Level",
+    "background_sectors",
+    "background_texture",
+    "band_widths",
+    "build_band_model",
+    "contour_band",
+    "contour_core",
+    "inner_mask",
+    "registration_band",
+]
+
+#: Half-width (px) of the contour band unless told otherwise.
+DEFAULT_BAND_PX = 3
+#: How far (px) the "ic" band reaches into a textured background (:func:`band_widths`).
+NARROW_BAND_PX = 2
+#: Background texture over noise (standard deviations) from which the "ic" band reaches only
+#: :data:`NARROW_BAND_PX` into the background (:func:`band_widths`): between what frame 0 of the
+#: simulator's textured substrate measures (about half the noise and more, at standard dose) and a
+#: flat background (a quarter of it at most, the noise model's estimate being a few % low).
+NARROW_BAND_TEXTURE = 0.4
+#: The "ic" Jacobian is denoised (``jacobian_denoise``) once the template averages this many frames:
+#: averaged over fewer, a low-dose template is too noisy for NL-means' patch similarity to mean anything.
+DENOISE_FROM_FRAMES = 4
+#: Fewest band pixels a template may have: translation, gain, offset and the background tiles'
+#: levels are fitted to them (a synthetic tip in a 16×16 ROI leaves 16, read 3.5 px off with a
+#: normal score; 36 in an 18×18 one are sometimes lost, but flagged; 63 in a 20×20 one: fine).
+MIN_BAND_PIXELS = 30
+#: The band keeps this many px more than its half-width from the ROI border: there the contour
+#: segments are where the object leaves the ROI, not edges of it.
+BORDER_MARGIN_PX = 3
+#: "contour" matching uses the contour pixels this far inside the ROI, unless fewer than
+#: :data:`MIN_CORE_PIXELS` remain.
+CORE_MARGIN_PX = 2
+MIN_CORE_PIXELS = 5
+#: Background texture: pixels at least this far (px) from the object, this far from the ROI
+#: border, and at least this many of them.
+TEXTURE_DISTANCE_PX = 4.0
+TEXTURE_BORDER_PX = 3
+MIN_TEXTURE_PIXELS = 50
+#: The Jacobian's smoothing (px) is this many times the template's noise over its contrast,
+#: clipped to ``[jacobian_sigma, jacobian_sigma_first]``: a noisy template needs a smoother one.
+JACOBIAN_SIGMA_PER_NOISE = 5.0
+#: NL-means on the template before the Jacobian: 7×7 patches in a 13×13 search (5×5 doubled the
+#: low-dose error on some seeds, 3×3 was worse everywhere: ``benchmarks/bench_tracking_seeds.py``).
+NL_MEANS_PATCH = 7
+NL_MEANS_DISTANCE = 6
+#: ``photometry="instrument"``: the gain's instrument is the template smoothed by this many px.
+INSTRUMENT_SIGMA = 1.5
+#: The noise weights take the gray level from the template smoothed by this many px.
+NOISE_LEVEL_SIGMA = 1.0
+#: The smoothed registration levels, in units of ``coarse_sigma``, widest first.
+LADDER = (4.0, 2.0, 1.0)
+#: Only the band's neighbourhood is filtered: this many Gaussian σ of the widest kernel, plus the
+#: 5-point derivative's reach and a margin, around it.
+FILTER_REACH_SIGMAS = 4.0
+FILTER_REACH_EXTRA_PX = 3
+
+
+def inner_mask(shape, margin) -> np.ndarray:
+    """True everywhere but a ``margin``-px border."""
+    h, w = shape
+    inner = np.zeros(shape, bool)
+    inner[margin:h - margin, margin:w - margin] = True
+    return inner
+
+
+def contour_band(mask, half_width) -> np.ndarray:
+    """Pixels within ``half_width`` of the contour ``mask``, away from the ROI border (whose
+    contour segments are where the object leaves the ROI, not edges of it)."""
+    k = 2 * half_width + 1
+    band = cv2.dilate(mask.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))) > 0
+    return band & inner_mask(mask.shape, half_width + BORDER_MARGIN_PX)
+
+
+def contour_core(contour: ContourTemplate) -> np.ndarray:
+    """The contour's pixels 2 px inside the ROI ("contour" matching), or all if fewer than 5."""
+    core = contour.mask & inner_mask(contour.mask.shape, CORE_MARGIN_PX)
+    return core if core.sum() >= MIN_CORE_PIXELS else contour.mask
+
+
+def band_widths(options: BandOptions, method: str, texture: float | None) -> tuple[int, int]:
+    """How far (px) the registration band reaches from the contour: ``(background, object)``.
+
+    The band's background pixels do not move with the object: where it moves to, another patch of
+    substrate lies beside it, and a textured background pulls the estimate towards where the
+    template was taken. Each pixel of the band also carries information, which is what the
+    estimate lacks when the noise dominates. So with ``band_px=None`` the ``"ic"`` band reaches
+    :data:`NARROW_BAND_PX` into the background when its ``texture`` is at least
+    :data:`NARROW_BAND_TEXTURE` times the noise (bias-limited), :data:`DEFAULT_BAND_PX` otherwise
+    (a flat background, or low dose: variance-limited), and 3 px into the object either way; the
+    trade is measured over many scenes by ``benchmarks/bench_tracking_seeds.py --param band_px=3``.
+    An explicit ``band_px`` is used on both sides (``inner_px`` deepens the object's side).
+
+    Raises
+    ------
+    RuntimeError
+        ``band_px=None`` for ``"ic"`` and no ``texture`` yet (it is measured on the first frame).
+    """
+    if options.band_px is not None or method != "ic":
+        width = DEFAULT_BAND_PX if options.band_px is None else options.band_px
+        return width, max(width, options.inner_px if method == "ic" else 0)
+    if texture is None:
+        raise RuntimeError("band_widths() with band_px=None needs init(): the background's texture is measured there")
+    outside = NARROW_BAND_PX if texture >= NARROW_BAND_TEXTURE else DEFAULT_BAND_PX
+    return outside, max(DEFAULT_BAND_PX, options.inner_px)
+
+
+def registration_band(contour: ContourTemplate, widths: tuple[int, int]) -> np.ndarray:
+    """The band of :func:`band_widths` ``(background, object)`` around ``contour``."""
+    outside, inside = widths
+    band = contour_band(contour.mask, outside)
+    if inside > outside:
+        # The object's inside moves with it: a deeper band on that side pins its gray level
+        # (the photometric nuisance) without taking in background that stays behind.
+        band |= contour_band(contour.mask, inside) & contour.region
+    return band
+
+
+def background_texture(patch, region, noise: NoiseModel, min_distance: float = TEXTURE_DISTANCE_PX) -> float:
+    """Standard deviation of the background's texture over that of the noise.
+
+    The background pixels at least ``min_distance`` px from the object (``~region``) minus
+    a quadratic surface fitted to them (shading) vary by noise and texture; the noise
+    model's variance at their gray levels is taken off the residual's robust variance
+    (1.4826 × MAD, squared). 0 for a flat background, or when fewer than 50 such pixels
+    remain.
+
+    Returns
+    -------
+    float
+        ``sqrt(max(robust var(residual) − mean noise variance, 0) / mean noise variance)``.
+    """
+    region = np.asarray(region, bool)
+    distance = cv2.distanceTransform((~region).astype(np.uint8), cv2.DIST_L2, 5)
+    ys, xs = np.nonzero((distance >= min_distance) & inner_mask(region.shape, TEXTURE_BORDER_PX))
+    if len(xs) < MIN_TEXTURE_PIXELS:
+        return 0.0
+    values = np.asarray(patch, np.float64)[ys, xs]
+    x, y = xs.astype(np.float64), ys.astype(np.float64)
+    surface = np.stack([np.ones_like(x), x, y, x * x, x * y, y * y], axis=1)
+    coef, *_ = np.linalg.lstsq(surface, values, rcond=None)
+    residual = values - surface @ coef
+    # Robust spread: object pixels that the region (an Otsu mask) left out are outliers.
+    spread = MAD_TO_SD * float(np.median(np.abs(residual - np.median(residual))))
+    noise_var = float(np.mean(noise.variance(values)))
+    excess = spread * spread - noise_var
+    return float(np.sqrt(max(excess, 0.0) / max(noise_var, 1e-12)))
+
+
+def background_sectors(xs, ys, inside, tile: int, width: int) -> np.ndarray | None:
+    """Background band pixels grouped in ``tile``-px tiles, each with its own level.
+
+    The background next to the object is not part of it: where the object moves to, the
+    substrate around it is another one, brighter or darker at the scale of a few px (texture,
+    shading). Fitted with the template's background, such a local change of level biases the
+    edge by a fraction of its width; each tile's own level absorbs it. Object pixels get -1: no
+    local level. None when the option is off (``tile=0``). ``width`` is the ROI's.
+    """
+    if tile <= 0:
+        return None
+    key = (ys // tile) * (width // tile + 1) + xs // tile
+    _, labels = np.unique(key[~inside], return_inverse=True)
+    sector = np.full(len(xs), -1, np.intp)
+    sector[~inside] = labels
+    return sector
+
+
+@dataclass(frozen=True)
+class Level:
+    """One registration level: the whitened template, smoothed by ``sigma`` (0: the Jacobian's
+    own smoothing at full resolution), and its gradients at the band's pixels."""
+
+    sigma: float
+    values: np.ndarray
+    gx: np.ndarray
+    gy: np.ndarray
+    setup: dict | None = None  # gauss_newton_setup of these with the band's weights (None: per call)
+
+    def subset(self, keep) -> Level:
+        return Level(self.sigma, self.values[keep], self.gx[keep], self.gy[keep], None)
+
+
+@dataclass(frozen=True)
+class BandModel:
+    """What the per-frame registration needs from one template, at the band's pixels.
+
+    Attributes
+    ----------
+    points : (K, 2) ndarray
+        The band's pixels ``(x, y)`` in ROI coordinates.
+    bbox : (x0, y0, x1, y1)
+        The whole band's bounding box (also after :meth:`subset`).
+    values : (K,) ndarray
+        The template's gray levels (not whitened: the score's reference).
+    inside : (K,) ndarray of bool
+        Object (True) or background pixel.
+    sector : (K,) ndarray of int or None
+        :func:`background_sectors`.
+    weights : (K,) ndarray or None
+        Inverse noise variance (relative), times the consistency mask; None: equal.
+    template_variance : (K,) ndarray
+        Noise variance of the whitened, averaged template.
+    instrument : (K,) ndarray or None
+        ``photometry="instrument"``: the smoothed template.
+    fine : Level
+        Full resolution (the efficient estimate).
+    smoothed : tuple of Level
+        The coarse-to-fine ladder, widest first (empty with ``coarse_sigma=0``).
+    jacobian_sigma : float
+        The smoothing of ``fine``'s Jacobian: at most 1 px, the template counts as averaged (mature).
+    rho : float
+        The scan line's correlation the template was whitened with (0: not whitened).
+    n_averaged : int
+        Frames the template averages.
+    """
+
+    points: np.ndarray
+    bbox: tuple[int, int, int, int]
+    values: np.ndarray
+    inside: np.ndarray
+    sector: np.ndarray | None
+    weights: np.ndarray | None
+    template_variance: np.ndarray
+    instrument: np.ndarray | None
+    fine: Level
+    smoothed: tuple[Level, ...]
+    jacobian_sigma: float
+    rho: float
+    n_averaged: int
+
+    def inside_image(self, roi, shift, shape, *, margin: int = 2, fraction: float = 1.0) -> bool:
+        """Whether at least ``fraction`` of the band lies ``margin`` px inside an image of ``shape``
+        when the template is at ``shift`` against ``roi``."""
+        x0, y0 = roi[:2]
+        bx0, by0, bx1, by1 = self.bbox
+        if (bx0 + x0 + shift[0] >= margin and by0 + y0 + shift[1] >= margin
+                and bx1 - 1 + x0 + shift[0] <= shape[1] - 1 - margin and by1 - 1 + y0 + shift[1] <= shape[0] - 1 - margin):
+            return True  # the band's bounding box is inside
+        px = self.points[:, 0] + x0 + shift[0]
+        py = self.points[:, 1] + y0 + shift[1]
+        inside = (px >= margin) & (py >= margin) & (px <= shape[1] - 1 - margin) & (py <= shape[0] - 1 - margin)
+        return bool(inside.mean() >= fraction)
+
+    def subset(self, keep) -> BandModel:
+        """The same model on the band pixels ``keep`` only (those still inside the image); the
+        Gauss–Newton constants are then rebuilt per call."""
+        def cut(v):
+            return None if v is None else v[keep]
+
+        return dataclasses.replace(
+            self, points=self.points[keep], values=self.values[keep], inside=self.inside[keep],
+            sector=cut(self.sector), weights=cut(self.weights), template_variance=self.template_variance[keep],
+            instrument=cut(self.instrument), fine=self.fine.subset(keep),
+            smoothed=tuple(level.subset(keep) for level in self.smoothed))
+
+
+def _jacobian_sigma(values, inside, noise: NoiseModel, n_averaged: int, options: TrackerOptions) -> float:
+    """The Jacobian's smoothing: grows with the template's noise relative to its contrast."""
+    contrast = abs(float(values[inside].mean() - values[~inside].mean())) if (
+        inside.any() and not inside.all()) else 1.0
+    noise_sd = float(np.sqrt(np.mean(noise.variance(values)) / n_averaged))
+    jac = options.jacobian
+    return float(np.clip(JACOBIAN_SIGMA_PER_NOISE * noise_sd / max(contrast, 1e-6), jac.jacobian_sigma,
+                         jac.jacobian_sigma_first))
+
+
+def _jacobian(template, whitened, values, noise, rho, n_averaged, sigma_j, options: TrackerOptions):
+    """The template's gradients (eq. 8's 5-point mask) that serve as the Jacobian, on the crop.
+
+    From the lightly smoothed template: a noisy Jacobian inflates the variance along the weakly
+    constrained direction (along the shaft, only the apex tells x); the curvature then comes from
+    the image (see :func:`semlab.tracking.registration.register`).
+    """
+    jac = options.jacobian
+    source = whitened
+    if jac.jacobian_denoise and n_averaged >= DENOISE_FROM_FRAMES:
+        # The Jacobian from the template denoised by non-local means: its noise (and the averaged
+        # template's leftover) enters every estimate through the gradients.
+        noise_sd = float(np.sqrt((1.0 - rho ** 2) * np.mean(noise.variance(values)) / n_averaged))
+        source = denoise_nl_means(whitened.astype(np.float64), h=jac.jacobian_denoise * noise_sd, sigma=noise_sd,
+                                  patch_size=NL_MEANS_PATCH, patch_distance=NL_MEANS_DISTANCE,
+                                  fast_mode=True).astype(np.float32)
+    gx, gy = five_point_gradients(cv2.GaussianBlur(source, (0, 0), sigma_j) if sigma_j > 0 else source)
+    if jac.normal_sigma > 0:
+        # Keep only the gradient's component along the edge normal, whose direction comes from the
+        # heavily smoothed template: noise across the normal would leak into x along a
+        # near-horizontal shaft, whose only x information is its apex.
+        nx, ny = five_point_gradients(cv2.GaussianBlur(template, (0, 0), jac.normal_sigma))
+        norm = np.hypot(nx, ny) + 1e-12
+        nx, ny = nx / norm, ny / norm
+        along = gx * nx + gy * ny
+        gx, gy = along * nx, along * ny
+    return gx, gy
+
+
+def _smoothed_levels(whitened, finest, at, coarse_sigma: float) -> list[tuple[float, np.ndarray, tuple]]:
+    """``(sigma, values, (gx, gy))`` of the ladder's levels at the pixels ``at`` (widest first)."""
+    levels = []
+    for factor in (LADDER if coarse_sigma > 0 else ()):
+        sigma = factor * coarse_sigma
+        if sigma == coarse_sigma:
+            smooth, grads = finest  # the finest level is the smoothed template the caller made
+        else:
+            smooth = cv2.GaussianBlur(whitened, (0, 0), sigma)
+            grads = five_point_gradients(smooth)
+        levels.append((sigma, smooth[at].astype(np.float64), tuple(g[at].astype(np.float64) for g in grads)))
+    return levels
+
+
+def _setups(fine: Level, smoothed: list[Level], weights, inside, options: TrackerOptions):
+    """The levels with their Gauss–Newton constants; without any when one fails (a template
+    without two levels: every fit then says why)."""
+    common = {"weights": weights, "photometric": options.photometry.photometric}
+    try:
+        regions = inside if options.photometry.photometry == "regions" else None
+        fine_setup = gauss_newton_setup(fine.values, fine.gx, fine.gy, **common, regions=regions)
+        setups = [gauss_newton_setup(level.values, level.gx, level.gy, **common, regions=inside)
+                  for level in smoothed]
+    except ValueError:
+        return fine, tuple(smoothed)
+    return (dataclasses.replace(fine, setup=fine_setup),
+            tuple(dataclasses.replace(level, setup=setup) for level, setup in zip(smoothed, setups)))
+
+
+def build_band_model(template, contour: ContourTemplate, band, noise: NoiseModel, options: TrackerOptions, *,
+                     n_averaged: int = 1, consistency=None) -> BandModel:
+    """Everything the per-frame registration needs from ``template``, computed once (offline).
+
+    Parameters
+    ----------
+    template : (h, w) ndarray of float32
+        The (averaged) ROI patch.
+    contour : ContourTemplate
+        Its contour template (region: the object).
+    band : (h, w) ndarray of bool
+        :func:`registration_band`.
+    noise : NoiseModel
+        The frames' noise (line correlation used when ``whiten``).
+    options : TrackerOptions
+    n_averaged : int
+        Frames the template averages (its noise variance is a frame's over this).
+    consistency : (K,) ndarray or None
+        Per-band-pixel weights from the template averaging (0: static background).
+    """
+    ys, xs = np.nonzero(band)
+    points = np.stack([xs, ys], axis=1).astype(np.float64)  # ROI coordinates
+    bbox = (int(xs.min()), int(ys.min()), int(xs.max()) + 1, int(ys.max()) + 1)
+    values = template[ys, xs].astype(np.float64)
+    rho = noise.rho if options.photometry.whiten else 0.0
+    coarse_sigma = options.stages.coarse_sigma
+    jac = options.jacobian
+    # Only the band's neighbourhood is filtered (the widest kernel's reach around it): at the band
+    # the values are those of the whole template's filtering, 4x cheaper.
+    reach = int(np.ceil(FILTER_REACH_SIGMAS * max(LADDER[0] * coarse_sigma, coarse_sigma + INSTRUMENT_SIGMA,
+                                                  jac.jacobian_sigma_first, jac.normal_sigma,
+                                                  NOISE_LEVEL_SIGMA))) + FILTER_REACH_EXTRA_PX
+    th, tw_ = template.shape
+    bx0, by0, bx1, by1 = bbox
+    sx0, sy0 = max(bx0 - reach, 0), max(by0 - reach, 0)
+    sx1, sy1 = min(bx1 + reach, tw_), min(by1 + reach, th)
+    near = np.ascontiguousarray(template[sy0:sy1, sx0:sx1])
+    # Whitened whole, then cut: the same first column.
+    whitened = np.ascontiguousarray(whiten_lines(template, rho)[sy0:sy1, sx0:sx1])
+    at = (ys - sy0, xs - sx0)
+    inside = contour.region[ys, xs]
+    sigma_j = _jacobian_sigma(values, inside, noise, n_averaged, options)
+    gx, gy = _jacobian(near, whitened, values, noise, rho, n_averaged, sigma_j, options)
+    fine = Level(0.0, whitened[at].astype(np.float64), gx[at].astype(np.float64), gy[at].astype(np.float64))
+    # The same, smoothed: the first, robust stage of every frame's registration.
+    smooth = cv2.GaussianBlur(whitened, (0, 0), coarse_sigma) if coarse_sigma > 0 else whitened
+    ladder = [Level(sigma, v, g[0], g[1]) for sigma, v, g in _smoothed_levels(
+        whitened, (smooth, five_point_gradients(smooth)), at, coarse_sigma)]
+    # The instrument for the gain: the template smoothed (its own noise mostly averaged out).
+    instrument = cv2.GaussianBlur(whitened, (0, 0), INSTRUMENT_SIGMA)[at].astype(np.float64) if (
+        options.photometry.photometry == "instrument") else None
+    weights = None
+    if options.photometry.noise_weights:
+        variance = noise.variance(cv2.GaussianBlur(near, (0, 0), NOISE_LEVEL_SIGMA)[at])
+        weights = variance.min() / variance
+    if consistency is not None:
+        weights = consistency if weights is None else weights * consistency
+    fine, smoothed = _setups(fine, ladder, weights, inside, options)
+    return BandModel(
+        points=points, bbox=bbox, values=values, inside=inside,
+        sector=background_sectors(xs, ys, inside, options.band.background_tile, band.shape[1]),
+        weights=weights,
+        # Noise variance of the (whitened, averaged) template at the band pixels.
+        template_variance=(1.0 - rho ** 2) * noise.variance(values) / n_averaged,
+        instrument=instrument, fine=fine, smoothed=smoothed, jacobian_sigma=sigma_j, rho=rho,
+        n_averaged=n_averaged)

@@ -1,0 +1,265 @@
+"""``"ic"``: inverse-compositional Gauss–Newton on the contour band (semlab's method).
+
+Beyond the paper, and measured best (``benchmarks/bench_tracking.py``): the band model
+(:mod:`semlab.tracking.band`) registered (:mod:`semlab.tracking.registration`) from the
+constant-velocity prediction; when that fails, from a coarse masked normalised-correlation
+search (:mod:`semlab.tracking.search`) over the window (the whole image after a loss); when both
+fail (an edge's contrast vanishing at contact with a sample, a brightness jump), the
+re-acquisition by contrast-blind correlation. The template is averaged over the first
+registered frames (:mod:`semlab.tracking.averaging`), frame 0 re-registered against it as the
+origin.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..template import identify_contour_template
+from .averaging import TemplateAverager, consistency_weights, store_frame
+from .band import MIN_BAND_PIXELS, build_band_model, registration_band
+from .method import Method, Motion, Setup, Verdict
+from .registration import FitResult, Start, register
+from .search import coarse_mask, coarse_search, coarse_template, reacquire
+from .uncertainty import Uncertainty, model_error, position_sigma
+
+__all__ = ["ICMethod"]
+
+#: A prediction that was within this many px last frame is "steady": the smoothed stage is skipped.
+STEADY_PX = 1.0
+#: A steady fit that has to move more than this (px) is a change of speed: the smoothed stage's job.
+STEADY_MAX_MOVE_PX = 3.0
+#: A fit from the prediction stands when its score reaches this fraction of the typical one.
+TYPICAL_SCORE_FRACTION = 0.9
+#: Two scores within this are about as good: the fit nearer the prediction wins.
+SCORE_TIE = 0.05
+#: The first frames' scores kept for the typical score (the loss threshold).
+SCORES_KEPT = 10
+#: A re-acquired candidate is refined by Gauss–Newton when the fit stays within this (px).
+REFINED_WITHIN_PX = 1.5
+#: The band must keep this fraction inside the image, this many px from its border.
+BAND_INSIDE_FRACTION = 0.5
+BAND_INSIDE_MARGIN_PX = 2
+#: A frame enters the template average when this fraction of the band are inliers and its score
+#: reaches this fraction of the first frames' median.
+AVERAGE_MIN_INLIERS = 0.8
+AVERAGE_MIN_SCORE_FRACTION = 0.8
+
+
+class ICMethod(Method):
+    """The ``"ic"`` method's state: its template (averaged), band model, photometric state and
+    the first frames' scores."""
+
+    name = "ic"
+    flags_uncertain = True
+
+    def start(self, setup: Setup) -> None:
+        super().start(setup)
+        self.noise, self.widths, self.to_8bit = setup.noise, setup.widths, setup.to_8bit
+        self.rho = setup.noise.rho if self.options.photometry.whiten else 0.0
+        self.n_averaged = 1
+        #: Covariance (px²) of the origin, frame 0's shift against the current template (0 while
+        #: frame 0 is the template).
+        self.origin_cov = np.zeros((2, 2))
+        self.consistency = None
+        self.gain, self.offset = 1.0, 0.0
+        self.scores: list[float] = []
+        self._score_median = (0, float("nan"))
+        self._coarse_mask = None
+        self._build()
+        self.averager = None
+        if self.options.averaging.template_frames > 1:
+            first = store_frame(setup.image, self.roi, np.zeros(2), 1.0, 0.0)
+            if first is not None:
+                self.averager = TemplateAverager(first, self.options.averaging.template_frames, self.roi, self.rho)
+
+    def _build(self) -> None:
+        """The band model and the coarse template of the current template (offline)."""
+        self.model = build_band_model(self.template, self.contour, self.band, self.noise, self.options,
+                                      n_averaged=self.n_averaged, consistency=self.consistency)
+        factor = self.options.search.coarse_factor
+        if self._coarse_mask is None:  # made once per contour: frame 0's, then the averaged template's
+            self._coarse_mask = coarse_mask(self.contour.region, self.band, factor)
+        self.coarse = coarse_template(self.template, self._coarse_mask, factor)
+
+    def _register(self, arr, start: Start, **kw) -> FitResult:
+        return register(arr, self.model, start, self.roi, self.options, **kw)
+
+    def _register_stored(self, stored) -> FitResult:
+        return self._register(stored.area, Start(stored.shift, stored.gain, stored.offset), at=stored.at,
+                              robust_start=False)
+
+    # ---- the loss threshold
+    def threshold(self) -> float:
+        """Score below which a frame is lost: the absolute ``min_score`` or, once scores are known,
+        ``min_relative_score`` of the first frames' median, whichever is higher."""
+        loss = self.options.loss
+        if self.scores:
+            return max(loss.min_score, loss.min_relative_score * self._median_score())
+        return loss.min_score
+
+    def _median_score(self) -> float:
+        """Median of the first frames' scores (cached: the list only grows, to 10)."""
+        if self._score_median[0] != len(self.scores):
+            self._score_median = (len(self.scores), float(np.median(self.scores)))
+        return self._score_median[1]
+
+    # ---- the states of a frame
+    def predict(self, motion: Motion) -> np.ndarray:
+        """The constant-velocity prediction."""
+        return motion.shift + motion.velocity
+
+    def follow(self, arr, predicted, motion: Motion) -> FitResult:
+        """Registration from the prediction: while tracking it is within a fraction of a pixel
+        (then the smoothed first stage is skipped) or a few px (a change of speed)."""
+        steady = motion.prediction_error < STEADY_PX
+        start = Start(predicted, self.gain, self.offset)
+        # A steady fit that has to move more than a few px is a change of speed: the smoothed
+        # stage is the tool then, not 20 crawling full-resolution iterations.
+        fit = self._register(arr, start, robust_start=not steady, max_move=STEADY_MAX_MOVE_PX if steady else None,
+                             give_up=True)
+        if steady and not fit.converged:
+            fit = self._register(arr, start, give_up=True)
+        return fit
+
+    def good(self, fit) -> bool:
+        typical = TYPICAL_SCORE_FRACTION * self._median_score() if self.scores else 1.0
+        return fit is not None and fit.converged and fit.score >= max(self.threshold(), typical)
+
+    def search(self, arr, window, predicted, fit) -> FitResult:
+        """A jump, a poor match or a lost target: the coarse search over the window, and the better
+        match of the two, the one nearer the prediction when about as good."""
+        found = self._register(arr, Start(coarse_search(arr, window, self.coarse, self.options.search.coarse_factor,
+                                                        self.roi), self.gain, self.offset))
+        if fit is None or (found.converged and (not fit.converged or found.score > fit.score + SCORE_TIE or (
+                found.score >= fit.score - SCORE_TIE
+                and np.hypot(*(found.shift - predicted)) < np.hypot(*(fit.shift - predicted))))):
+            return found
+        return fit
+
+    def acceptable(self, fit) -> bool:
+        return fit.converged and fit.score >= self.threshold()
+
+    def reacquire(self, arr, window, predicted) -> Verdict | None:
+        """The appearance changed: the contrast-invariant correlation of the object over the whole
+        window, refined by Gauss–Newton when that converges nearby."""
+        found = reacquire(arr, window, self.template, self.contour.region, self.roi, self.rho)
+        if found is None:
+            return None
+        try:
+            fit = self._register(arr, Start(found.shift, found.gain, found.offset))
+        except (ValueError, np.linalg.LinAlgError):
+            fit = None
+        if (fit is not None and fit.converged and fit.score >= self.threshold()
+                and np.hypot(*(fit.shift - found.shift)) <= REFINED_WITHIN_PX):
+            self.gain, self.offset = fit.gain, fit.offset
+            return Verdict.accept(fit.shift, fit.score, reacquired=True, found=fit)
+        self.gain, self.offset = found.gain, found.offset
+        return Verdict.accept(found.shift, found.score, reacquired=True, found=found)
+
+    def verdict(self, arr, fit, predicted) -> Verdict:
+        if not fit.converged:
+            return Verdict.lose(f"no convergence (score {fit.score:.2f})")
+        if fit.score < self.threshold():
+            return Verdict.lose(f"no match (score {fit.score:.2f} < {self.threshold():.2f})")
+        if not self.model.inside_image(self.roi, fit.shift, arr.shape, margin=BAND_INSIDE_MARGIN_PX,
+                                       fraction=BAND_INSIDE_FRACTION):
+            return Verdict.lose("the target has left the image")
+        self.gain, self.offset = fit.gain, fit.offset
+        if len(self.scores) < SCORES_KEPT:
+            self.scores.append(fit.score)
+        return Verdict.accept(fit.shift, fit.score, found=fit)
+
+    def sigma(self, verdict: Verdict) -> Uncertainty | None:
+        """The frame's fit (or the re-acquired match's) and the origin's, and the model error once
+        the object has moved (:mod:`semlab.tracking.uncertainty`)."""
+        found = verdict.found
+        if found is None:
+            return Uncertainty((np.inf, np.inf), (np.inf, np.inf))
+        cov = found.covariance() if isinstance(found, FitResult) else found.covariance
+        cov = np.full((2, 2), np.inf) if cov is None else cov
+        moved = float(np.hypot(*(np.asarray(verdict.shift, float) - self.origin)))
+        return Uncertainty(position_sigma(cov, self.origin_cov, model_sd=model_error(moved)),
+                           position_sigma(cov, self.origin_cov))
+
+    def after_accept(self, arr, verdict: Verdict) -> np.ndarray | None:
+        """The frame enters the template average when it registered well. The answer is the shift
+        against the template that measured it, with that template's origin; a template refreshed
+        from this frame brings its own origin, and the motion moves into its coordinates."""
+        fit = verdict.found
+        if self.averager is None or not isinstance(fit, FitResult) or not (
+                fit.inliers > AVERAGE_MIN_INLIERS
+                and fit.score >= AVERAGE_MIN_SCORE_FRACTION * np.median(self.scores)):
+            return None
+        origin = self.origin.copy()
+        self._average(arr, fit)
+        return self.origin - origin
+
+    # ---- template averaging
+    def _average(self, arr, fit: FitResult) -> None:
+        """Running mean of the registered, photometrically normalised ROI (a less noisy template).
+
+        Frame 0 is registered against every new template: it defines the origin, which so carries
+        frame 0's noise once instead of the one-frame template's noise in every position.
+        """
+        stored = store_frame(arr, self.roi, fit.shift, fit.gain, fit.offset)
+        if stored is None:
+            return
+        mean = self.averager.add(stored, self.template)
+        self.n_averaged = self.averager.count
+        if self.averager.complete:
+            self._rebuild()
+            self.averager = None
+            return
+        if mean is None:
+            return
+        self.template = mean
+        self._build()
+        first = self.averager.frames[0]
+        ref = self._register_stored(first)
+        if ref.converged:
+            first.shift, first.gain, first.offset = ref.shift.copy(), ref.gain, ref.offset
+            self.origin = ref.shift.copy()
+            self.origin_cov = ref.covariance()
+
+    def _rebuild(self) -> None:
+        """Every stored frame registered against the averaged template and averaged anew (twice with
+        ``reidentify``: the second pass against the band of the re-identified contour)."""
+        passes = 2 if self.options.averaging.reidentify else 1
+        cut = self.options.averaging.consistency_cut
+        for pass_no in range(passes):
+            patches = self.averager.reregister(self._register_stored)
+            self.template = patches.mean(axis=0).astype(np.float32)
+            if pass_no == 0 and passes > 1:
+                # The next pass registers every stored frame against the new band, frame 0 (the
+                # origin) included.
+                self._reidentify()
+            self.consistency = (consistency_weights(patches, self.averager.shifts(), self.band, self.contour, cut)
+                                if cut is not None else None)
+            self._build()
+        # The origin: where frame 0 (the first stored frame) sits against the new template.
+        first = self.averager.frames[0]
+        self.origin = np.asarray(first.shift, float).copy()
+        self.origin_cov = self._register_stored(first).covariance()
+
+    def _reidentify(self) -> None:
+        """The contour template and the band identified again, on the averaged template.
+
+        Frame 0's contour follows frame 0's noise: the band built around it holds the pixels that
+        noise pushed over the threshold, so frame 0's residuals on it are not centred and its own
+        registration — the origin of every displacement — is pulled. The averaged template's
+        contour, at frame 0's threshold (the user's choice, or Otsu's of frame 0), has lost that
+        noise (``reidentify``'s effect is measured by ``benchmarks/bench_tracking_seeds.py --param
+        reidentify=True``). Kept as it was when no usable contour comes out.
+        """
+        lo, scale = self.to_8bit
+        template8 = np.clip(np.rint((self.template - lo) * scale), 0, 255).astype(np.uint8)
+        params = dict(self.options.template.as_kwargs(), threshold=self.contour.threshold)
+        try:
+            contour = identify_contour_template(template8, **params)
+        except ValueError:
+            return
+        band = registration_band(contour, self.widths)
+        if band.sum() < MIN_BAND_PIXELS or not (contour.region.any() and not contour.region.all()):
+            return
+        self.contour, self.band = contour, band
+        self._coarse_mask = None  # the coarse search's mask follows the new region
