@@ -63,7 +63,9 @@ x, y (px) are where the ROI's centre point, (x + (w-1)/2, y + (h-1)/2) in frame 
 each frame; pixel centres are at integer coordinates, x to the right, y down. x_nm, y_nm = x, y times
 the pixel size; they are empty when the pixel size is unknown (PNG/JPEG/video, TIFFs without vendor
 metadata) and --pixel-size is not given. score is the tracker's match quality in [0, 1]; ok=False
-(with empty x, y) marks frames where the target was lost.
+(with empty x, y) marks frames where the target was lost or its answer was too uncertain to trust
+(semlab's tracker, the default). --sigma adds sigma_x, sigma_y: each frame's standard uncertainty
+(px) as the tracker estimates it.
 
 Next to OUT the command writes OUT.json: semlab version, command line, method and parameters, ROI,
 pixel size and where it came from, every input file with its SHA-256, frame count, times, and the
@@ -347,6 +349,12 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="OUT.csv",
         help="output CSV; OUT.csv.json is written beside it",
     )
+    t.add_argument(
+        "--sigma",
+        action="store_true",
+        help="add each frame's standard uncertainty: columns sigma_x, sigma_y (px) after the others "
+        "(empty where the frame is not ok)",
+    )
     t.add_argument("--no-progress", action="store_true", help="no progress bars on stderr")
     t.add_argument("--quiet", "-q", action="store_true", help="no summary on stdout")
 
@@ -517,7 +525,7 @@ def _cmd_track(args, argv) -> int:
                 order="given" if args.keep_order else "natural")
     _note_reordering(seq)
     roi, roi_source = _track_roi(args, seq)
-    res = _track_table(_run_tracker(args, seq, roi, params), seq)
+    res = _track_table(_run_tracker(args, seq, roi, params), seq, sigma=args.sigma)
 
     def record(tmp_csv: Path) -> dict:
         return _track_record(args, argv, params, seq, res, roi, roi_source, out, tmp_csv, started)
@@ -565,13 +573,14 @@ def _run_tracker(args, seq, roi, params):
     return df
 
 
-def _track_table(df, seq):
-    """The CSV's table: the track in px and nm, and each frame's file."""
+def _track_table(df, seq, *, sigma=False):
+    """The CSV's table: the track in px and nm, and each frame's file (and, with ``sigma``, each
+    frame's standard uncertainty in px)."""
     import numpy as np
     import pandas as pd
 
     scale = np.nan if seq.pixel_size_nm is None else seq.pixel_size_nm
-    return pd.DataFrame(
+    table = pd.DataFrame(
         {
             "frame": df["frame"].astype(int).to_numpy(),
             "x": df["x"].astype(float).to_numpy(),
@@ -583,6 +592,10 @@ def _track_table(df, seq):
             "file": [p.name for p in seq.paths],
         }
     )
+    if sigma:
+        for axis in ("sigma_x", "sigma_y"):
+            table[axis] = df[axis].astype(float).to_numpy() if axis in df else np.nan
+    return table
 
 
 def _track_record(args, argv, params, seq, res, roi, roi_source, out, tmp_csv, started) -> dict:

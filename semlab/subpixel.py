@@ -340,6 +340,10 @@ class GaussNewtonResult:
     robust_ssr : float
         ``Σ prior·weights²·residual²``: the squared influence ``ψ(r)²`` of the residuals, which an
         outlier bounds (Huber's M-estimator variance; ``weighted_ssr`` grows with its residual).
+    information : ndarray or None
+        The normal matrix the shift's covariance takes: as ``normal_matrix``, but with two-level
+        photometry always with the levels eliminated (the step switches to the plain one once it
+        is small).
     """
 
     shift: np.ndarray
@@ -355,6 +359,7 @@ class GaussNewtonResult:
     n_pixels: int = 0
     weight_total: float = float("nan")
     robust_ssr: float = float("nan")
+    information: np.ndarray | None = None
 
 
 def _remap_points(image, xs, ys):
@@ -751,7 +756,13 @@ class _GaussNewton:
 
     def _result(self, p, g, o, robust, it, converged, samples, residual, hess) -> GaussNewtonResult:
         total = self.prior * robust
+        information = hess
+        if self.two_level and self.setup.get("absorbed_hess") is not None:
+            # The shift's information with the two levels eliminated (they follow the object's and
+            # the background's means), whatever the last step used.
+            information = (g * g * (robust @ self.setup["absorbed_hess"])).reshape(2, 2)
         return GaussNewtonResult(
+            information=information,
             shift=p, gain=g, offset=o, weights=robust, inliers=np.count_nonzero(robust >= 1.0) / robust.size,
             iterations=it, converged=converged,
             samples=samples if samples is not None else np.full_like(self.t, np.nan),

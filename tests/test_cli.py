@@ -521,3 +521,24 @@ def test_unknown_pixel_size_names_the_flag(tmp_path, capsys):
                  "--no-progress"]) == EXIT_OK  # fmt: skip
     out = capsys.readouterr().out
     assert "pass --pixel-size NM" in out and "pixel_size_nm" not in out
+
+
+def test_track_sigma_adds_the_libraries_uncertainty(tmp_path):
+    # --sigma: the same sigma_x, sigma_y as semlab.track on the same frames (the CLI and the library
+    # agree), after the contract's columns; a noisy blob so that the uncertainty is not zero.
+    import semlab
+
+    rng = np.random.default_rng(7)
+    frames = [np.clip(f + rng.normal(0, 6, f.shape), 0, 255).round().astype(np.uint8) for f in _probe_frames(5)]
+    folder = _write_seq(tmp_path / "seq", frames)
+    out = tmp_path / "s.csv"
+    roi = (40, 30, 61, 51)
+    code = main(["track", str(folder), "--roi", ",".join(map(str, roi)), "--sigma", "--out", str(out),
+                 "--no-progress", "--quiet"])  # fmt: skip
+    assert code == EXIT_OK
+    df = pd.read_csv(out)
+    assert list(df.columns) == [*COLUMNS, "sigma_x", "sigma_y"]
+    ref = semlab.track(np.stack(frames), roi, progress=False)
+    np.testing.assert_allclose(df[["sigma_x", "sigma_y"]], ref[["sigma_x", "sigma_y"]], atol=6e-7)  # six decimals
+    ok = df["ok"].to_numpy()
+    assert ok[1:].any() and (df.loc[ok, "sigma_x"].iloc[1:] > 0).all()

@@ -63,8 +63,8 @@ MUTANTS = {
         "p[0] -= damping * dx",
         "p[0] += damping * dx", SUBPIXEL_TESTS),
     "subpixel: Huber weights inverted (outliers weighted up)": (
-        "robust = c / np.maximum(np.abs(z), c)",
-        "robust = np.maximum(np.abs(z), c) / c", SUBPIXEL_TESTS),
+        "return c / np.maximum(np.abs(z), c), spread",
+        "return np.maximum(np.abs(z), c) / c, spread", SUBPIXEL_TESTS),
     "subpixel: line whitening adds the previous pixel instead of subtracting it": (
         "np.float32(-rho)",
         "np.float32(rho)", SUBPIXEL_TESTS),

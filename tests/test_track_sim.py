@@ -63,11 +63,10 @@ def test_fluctuation_and_clutter_probe_still(kind):
     # shaft, cost the default tracker neither lock nor accuracy: RMSE within 2x the one-frame
     # bound (the displacement carries frame 0's noise once: ~sqrt(2) x bound; see the static test).
     seq = make_sequence(kind, n_frames=50, seed=2, motion="still")
-    s = _stats(seq)
-    # At most one frame of 50 (2 %, issue 14's target) flagged: where the occluder covers the shaft,
-    # its information is gone and the answer may be reported too uncertain.
-    assert s["loss_rate"] <= 0.02
+    df = track(seq.frames, seq.roi, progress=False)
+    s = summarize_errors(tracking_errors(df, seq.truth, seq.roi), seq.crb)
     assert s["rmse"] <= 2.0 * s["crb"]
+    _flagged_only_under_the_occluder(df)
 
 
 @functools.cache
@@ -77,7 +76,23 @@ def _moving_stats(kind, seed=2):
     seq = make_sequence(kind, n_frames=50, seed=seed)
     assert seq.meta["motion"] == "sweep"
     assert np.ptp(seq.truth["x"]) > 55
-    return _stats(seq)
+    df = track(seq.frames, seq.roi, progress=False)
+    return summarize_errors(tracking_errors(df, seq.truth, seq.roi), seq.crb), df
+
+
+#: The template's similarity while the occluder is off the band (measured >= 0.93 on these scenes;
+#: it falls to ~0.7 where the occluder covers the shaft).
+CLEAR_SCORE = 0.9
+
+
+def _flagged_only_under_the_occluder(df):
+    """A frame is flagged only for information its data lack: where the occluder covers the band
+    (the score below CLEAR_SCORE) its precision may pass SIGMA_LIMIT_PX; while the band is clear, at
+    most 2 % of the frames (issue 14's target) are flagged."""
+    clear = df["score"] >= CLEAR_SCORE
+    assert (~df["ok"][clear]).mean() <= 0.02
+    flagged = ~df["ok"]
+    assert not flagged.any() or df["score"][flagged].max() < CLEAR_SCORE
 
 
 @pytest.mark.parametrize("kind", ["gray_fluctuation", "clutter_occluder"])
@@ -85,9 +100,8 @@ def test_fluctuation_and_clutter_moving_probe_followed(kind):
     # The same conditions with the probe travelling ~60 px: the tracker stays on it in every
     # frame (no error above 2 px, ~20x the bound; a tracker held by the static background,
     # as the 200x200 ROI's clutter holds OpenCV's ECC, would be tens of px off).
-    s = _moving_stats(kind)
-    # At most 2 of 50 frames (the occluder over the shaft: too uncertain to report) flagged.
-    assert s["loss_rate"] * s["n"] <= 2
+    s, df = _moving_stats(kind)
+    _flagged_only_under_the_occluder(df)
     assert s["max_error"] <= 2.0
 
 
@@ -98,8 +112,8 @@ def test_fluctuation_and_clutter_moving_probe_near_the_bound(kind, seed):
     # 0's error as well as frame k's (sqrt(2) x the bound for an efficient estimator; along the
     # sweep the moved ROI's bound is up to 13 % above frame 0's), so 2x leaves ~25 % for the
     # static background's pull (measured, 50 frames: seed 0 1.87x / 1.65x, seed 2 1.81x / 1.79x).
-    s = _moving_stats(kind, seed=seed)
-    assert s["loss_rate"] * s["n"] <= 2  # the occluder's frames, as above
+    s, df = _moving_stats(kind, seed=seed)
+    _flagged_only_under_the_occluder(df)
     assert s["rmse"] <= 2.0 * s["crb"]
 
 
@@ -110,7 +124,7 @@ def test_fluctuation_and_clutter_moving_probe_near_the_bound(kind, seed):
     "background beside the object pulls the estimate back while the probe is within a few px of where the "
     "template was taken. A matter for semlab/tracking/."))
 def test_fluctuation_and_clutter_moving_probe_near_the_bound_particle_at_the_apex():
-    assert all(_moving_stats(kind, seed=1)["rmse"] <= 2.0 * _moving_stats(kind, seed=1)["crb"]
+    assert all(_moving_stats(kind, seed=1)[0]["rmse"] <= 2.0 * _moving_stats(kind, seed=1)[0]["crb"]
                for kind in ("gray_fluctuation", "clutter_occluder"))
 
 

@@ -51,6 +51,7 @@ class ICMethod(Method):
 
     name = "ic"
     flags_uncertain = True
+    widens_search = True
 
     def start(self, setup: Setup) -> None:
         super().start(setup)

@@ -122,6 +122,9 @@ class Method:
     #: Whether an answer whose :meth:`sigma` is too large is flagged (``"ic"``; the paper's methods
     #: keep their own verdicts, exactly as the paper has them, and only report the uncertainty).
     flags_uncertain = False
+    #: Whether a frame the search window did not find it in is searched over the whole frame before
+    #: it is lost (``"ic"``; the paper's methods search their window, as the paper has them).
+    widens_search = False
 
     def __init__(self, options: TrackerOptions):
         self.options = options

@@ -108,6 +108,7 @@ class FitResult:
     n_pixels: int
     weight_total: float
     robust_ssr: float = float("nan")
+    information: np.ndarray | None = None
 
     def covariance(self) -> np.ndarray:
         """The shift's covariance (px², 2×2) from this fit alone: ``s² N⁻¹``.
@@ -121,7 +122,7 @@ class FitResult:
         Infinite when the fit left nothing to judge it by.
         """
         inf = np.full((2, 2), np.inf)
-        matrix = self.normal_matrix
+        matrix = self.normal_matrix if self.information is None else self.information
         dof = self.weight_total - (0 if matrix is None else len(matrix)) - FIT_NUISANCE_PARAMETERS
         if matrix is None or not dof > 0 or not np.isfinite(self.robust_ssr):
             return inf
@@ -139,7 +140,8 @@ class FitResult:
         return cls(shift=fit.shift, gain=fit.gain, offset=fit.offset, score=score,
                    converged=fit.converged if converged is None else converged, inliers=fit.inliers,
                    iterations=fit.iterations, normal_matrix=fit.normal_matrix, weighted_ssr=fit.weighted_ssr,
-                   n_pixels=fit.n_pixels, weight_total=fit.weight_total, robust_ssr=fit.robust_ssr)
+                   n_pixels=fit.n_pixels, weight_total=fit.weight_total, robust_ssr=fit.robust_ssr,
+                   information=fit.information)
 
 
 @dataclass(frozen=True)

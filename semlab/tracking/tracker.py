@@ -307,6 +307,11 @@ class Tracker:
         found = None if motion.lost else method.follow(arr, predicted, motion)
         if not method.good(found):
             found = method.search(arr, window, predicted, found)
+            whole = search_window(self.roi, self.options.search.search_size, predicted, arr.shape, whole=True)
+            if method.widens_search and not motion.lost and not method.acceptable(found) and window != whole:
+                # Farther than the window reaches (a feed-forward step, the paper's 200-px moves in
+                # two frames): the whole frame before giving up, rather than a lost frame.
+                found = method.search(arr, whole, predicted, found)
         if not motion.lost and not method.acceptable(found):
             verdict = method.reacquire(arr, window, predicted)
             if verdict is not None:
@@ -320,17 +325,18 @@ class Tracker:
         motion.prediction_error = np.inf if verdict.reacquired else float(np.hypot(*(verdict.shift - predicted)))
         result = self._accept(verdict.shift, verdict.score)
         uncertainty = self.algorithm.sigma(verdict)
-        limit = self.options.loss.max_sigma
-        if (uncertainty is not None and limit is not None and self.algorithm.flags_uncertain
-                and too_uncertain(uncertainty.precision, limit)):
-            # Followed (the motion moves on, the next frame starts from here) but not trusted: a
-            # flag is better than a number that may be a pixel off. It does not enter the template.
-            p = uncertainty.precision
-            return TrackResult(float("nan"), float("nan"), result.score, False,
-                               f"too uncertain: the frame allows ({p[0]:.2f}, {p[1]:.2f}) px > max_sigma {limit:g} px")
         moved = self.algorithm.after_accept(arr, verdict)
         if moved is not None:  # the template's origin moved: the state follows (the position stays)
             motion.shift = motion.shift + moved
+        limit = self.options.loss.max_sigma
+        if (uncertainty is not None and limit is not None and self.algorithm.flags_uncertain
+                and too_uncertain(uncertainty.precision, limit)):
+            # Followed (the motion moves on, the next frame starts from here; a frame that
+            # registered well still improves the template) but not trusted: a flag is better than
+            # a number that may be a pixel off.
+            p = uncertainty.precision
+            return TrackResult(float("nan"), float("nan"), result.score, False,
+                               f"too uncertain: the frame allows ({p[0]:.2f}, {p[1]:.2f}) px > max_sigma {limit:g} px")
         if uncertainty is None:
             return result
         sx, sy = uncertainty.sigma

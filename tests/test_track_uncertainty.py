@@ -1,0 +1,189 @@
+"""The tracker's per-frame uncertainty (sigma_x, sigma_y) and its flags, and one answer whatever the
+gray-level encoding of the frames (issue 14)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.special import erf
+from skimage import img_as_float
+
+import semlab
+from semlab.evaluation import make_family_sequence
+from semlab.evaluation.scoring import frame_errors
+from semlab.tracking import METHODS, Tracker, track
+from semlab.tracking.uncertainty import (
+    MODEL_ERROR_PX,
+    SIGMA_LIMIT_PX,
+    least_squares_covariance,
+    model_error,
+)
+
+ROI = (60, 40, 120, 120)
+CENTRE = (ROI[0] + (ROI[2] - 1) / 2, ROI[1] + (ROI[3] - 1) / 2)
+
+
+def wedge_frame(dx, dy, *, noise=0.0, seed=0, shape=(200, 260), blur=1.2):
+    """A bright blunt wedge (tip near (120, 100), pointing +x) on a flat background, analytic."""
+    yy, xx = np.mgrid[:shape[0], :shape[1]].astype(np.float64)
+    u, v = xx - 120.0 - dx, yy - 100.0 - dy
+    half = math.radians(14.0)
+    d = np.maximum(np.abs(v) * math.cos(half) + u * math.sin(half), u - 6.0)  # signed distance, flat end 6 px ahead
+    img = 50.0 + 130.0 * 0.5 * (1 - erf(d / (math.sqrt(2) * blur)))
+    if noise:
+        img = img + np.random.default_rng(seed).normal(0.0, noise, img.shape)
+    return img.astype(np.float32)
+
+
+# --------------------------------------------------------------------------- the columns and the flags
+def test_sigma_columns_nan_exactly_when_not_ok():
+    frames = [wedge_frame(0.3 * k, 0.1 * k, noise=4.0, seed=k) for k in range(8)]
+    frames[4] = np.full_like(frames[4], np.nan)  # an unusable frame: flagged, no sigma
+    df = track(frames, ROI)
+    assert list(df.columns[-2:]) == ["sigma_x", "sigma_y"]
+    ok = df["ok"].to_numpy()
+    assert not ok[4] and ok[[1, 2, 3, 5, 6, 7]].all()
+    assert np.isnan(df.loc[~df.ok, ["sigma_x", "sigma_y"]].to_numpy()).all()
+    assert np.isfinite(df.loc[df.ok, ["sigma_x", "sigma_y"]].to_numpy()).all()
+
+
+def test_sigma_follows_the_noise_as_theory_says():
+    # White noise of sd s on a fixed wedge: the shift's Fisher information is sum(grad^2)/s^2, so
+    # sigma scales with s; the fit measures s from its own residuals. Across the wedge (y, its flanks'
+    # direction), noise 2 -> 8 gray levels: 4x, within 20 % (the residual variance of ~1000 band
+    # pixels is known to a few %, the median of 5 frames' sigma to ~10 %).
+    def median_sigma_y(noise):
+        # A still probe: the fits alone (no model error is added before the object has moved).
+        frames = [wedge_frame(0.0, 0.0, noise=noise, seed=k) for k in range(6)]
+        df = track(frames, ROI, template_frames=1, max_sigma=None)
+        return float(np.median(df["sigma_y"].iloc[1:]))
+
+    assert 3.2 < median_sigma_y(8.0) / median_sigma_y(2.0) < 4.8
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "known limitation (measured, issue 14): along the wedge's axis, where only the apex tells x, a noisy "
+    "template's gradients count their own noise as information: at noise 16 on this wedge sigma_x is "
+    "0.14 px while 40 frames scatter by 0.29 px (0.036 vs 0.026 at noise 2). Not corrected: a correction "
+    "from the template's noise, or the image's own curvature, made the corpus's flags worse"))
+def test_sigma_along_the_weak_direction_covers_the_scatter_at_high_noise():
+    frames = [wedge_frame(0.0, 0.0, noise=16.0, seed=k) for k in range(41)]
+    df = track(frames, ROI, template_frames=1, max_sigma=None)
+    scatter = float(np.std(df["x"].iloc[1:]))
+    assert float(np.median(df["sigma_x"].iloc[1:])) >= 0.8 * scatter
+
+
+def test_sigma_covers_the_scatter_of_a_noisy_still_probe():
+    # 40 frames of a still wedge under white noise: the one-frame template's noise is in every
+    # answer (a common offset, which the origin's covariance does not carry with template_frames=1)
+    # so the frame-to-frame scatter is what sigma must cover: 95 % ellipses hold 80-100 % of the
+    # frames (binomial sampling error of 40 frames: ±7 %, and sigma is built from a noisy template).
+    frames = [wedge_frame(0.0, 0.0, noise=10.0, seed=k) for k in range(41)]
+    df = track(frames, ROI, max_sigma=None)
+    ex, ey = df["x"] - CENTRE[0], df["y"] - CENTRE[1]
+    ex, ey = (ex - ex[1:].mean())[1:], (ey - ey[1:].mean())[1:]
+    inside = (ex / df["sigma_x"][1:]) ** 2 + (ey / df["sigma_y"][1:]) ** 2 <= 5.991
+    assert 0.8 <= inside.mean() <= 1.0
+
+
+def test_a_frame_whose_data_allow_too_little_is_flagged_and_followed():
+    # Noise so strong that one frame cannot place the wedge within SIGMA_LIMIT_PX: ok=False with the
+    # reason, and the tracker still follows (the next quiet frame is ok, on the probe).
+    quiet = [wedge_frame(0.5 * k, 0.0, noise=2.0, seed=k) for k in range(6)]
+    loud = wedge_frame(3.0, 0.0, noise=120.0, seed=99)
+    frames = quiet + [loud] + [wedge_frame(3.5, 0.0, noise=2.0, seed=7)]
+    t = Tracker(template_frames=1)
+    t.init(frames[0], ROI)
+    results = [t.update(f) for f in frames[1:]]
+    flagged = results[5]
+    assert not flagged.ok and "too uncertain" in flagged.reason and math.isnan(flagged.sigma_x)
+    last = results[6]
+    assert last.ok and abs(last.x - CENTRE[0] - 3.5) < 0.2
+    # max_sigma=None reports it instead (a user who accepts the uncertainty).
+    t = Tracker(template_frames=1, max_sigma=None)
+    t.init(frames[0], ROI)
+    r = [t.update(f) for f in frames[1:]][5]
+    assert r.ok and r.sigma_x > SIGMA_LIMIT_PX
+
+
+def test_model_error_grows_with_the_displacement_from_frame_0():
+    assert model_error(0.0) == 0.0 and model_error(0.5) == pytest.approx(0.5 * MODEL_ERROR_PX)
+    assert model_error(40.0) == MODEL_ERROR_PX and model_error(float("nan")) == MODEL_ERROR_PX
+
+
+def test_least_squares_covariance_is_s2_over_the_information():
+    rng = np.random.default_rng(1)
+    jac = rng.normal(size=(500, 2))
+    residual = rng.normal(0.0, 3.0, 500)
+    cov = least_squares_covariance(jac, residual)
+    np.testing.assert_allclose(cov, residual @ residual / 498 * np.linalg.inv(jac.T @ jac))
+    assert np.isinf(least_squares_covariance(jac[:2], residual[:2])).all()  # no degrees of freedom
+
+
+# --------------------------------------------------------------------------- encodings
+@pytest.mark.parametrize("method", METHODS)
+def test_the_encoding_of_the_gray_levels_never_changes_the_answer(method):
+    # The same 8-bit frames as uint8, uint16 (x257), float32 in 0-255 and float in 0-1
+    # (skimage.img_as_float): the same track within 0.01 px, the same flags.
+    from semlab.sim import make_sequence
+
+    frames8 = make_sequence("moves_200px", seed=1, n_cycles=1).frames[:14]
+    roi = make_sequence("moves_200px", seed=1, n_cycles=1).roi
+    reference = track(frames8, roi, method=method)
+    for frames in (frames8.astype(np.uint16) * 257, frames8.astype(np.float32), img_as_float(frames8)):
+        other = track(frames, roi, method=method)
+        assert (other["ok"] == reference["ok"]).all()
+        ok = reference["ok"]
+        np.testing.assert_allclose(other.loc[ok, ["x", "y"]], reference.loc[ok, ["x", "y"]], atol=0.01)
+
+
+def test_float_frames_in_0_1_are_a_probe_not_noise():
+    frame = wedge_frame(0.0, 0.0, noise=3.0) / 255.0
+    r = Tracker().init(frame, ROI)
+    assert r.ok
+
+
+# --------------------------------------------------------------------------- the corpus
+def _coverage(family, seed):
+    seq = make_family_sequence(family, seed)
+    df = track(seq.frames, seq.roi, progress=False)
+    e = frame_errors(df, seq.truth, seq.roi)
+    e = e[(e.frame > 0) & e.ok & e.visible]
+    d2 = (e.ex / e.sigma_x) ** 2 + (e.ey / e.sigma_y) ** 2
+    return float(np.mean(d2 <= 5.991)), len(e) / max(len(seq.frames) - 1, 1)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("family", ["still", "moves_200px", "jumps", "shapes", "substrates"])
+def test_sigma_is_calibrated_on_the_corpus(family):
+    # Development seed 100 of the families where the model error is what MODEL_ERROR_PX says: 95 %
+    # ellipses hold 80-100 % of the ok frames (a 40-60-frame sequence: ±6 % binomial error, and its
+    # frames share one origin, so the coverage of one sequence scatters more than that).
+    coverage, _ = _coverage(family, 100)
+    assert 0.8 <= coverage <= 1.0
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "known limitation (issue 14, measured on development seeds 100-109): on a wandering probe over the "
+    "background, probe-only charging with strong gain jitter, dense drifting clutter and the semi-real "
+    "needle the per-sequence bias (0.3-0.9 px) exceeds the model error the tracker adds (0.25 px): 95 % "
+    "ellipses hold 48-92 % of the frames (clutter 0.48, gray_charging 0.32 before the model error)"))
+def test_sigma_is_calibrated_where_the_background_pulls():
+    assert all(_coverage(f, 107)[0] >= 0.8 for f in ("wander", "gray_charging", "clutter"))
+
+
+def test_low_dose_starts():
+    # A few electrons per pixel: the contour's contrast is under twice one pixel's noise but many
+    # times that of the smoothed ROI the contour is found in: the tracker starts (issue 14; it
+    # refused 10 of 10 test seeds before).
+    seq = make_family_sequence("low_dose", 100)
+    assert Tracker().init(seq.frames[0], seq.roi).ok
+
+
+def test_semlab_track_reports_the_sigma_too():
+    frames = [wedge_frame(0.3 * k, 0.0, noise=3.0, seed=k) for k in range(4)]
+    df = semlab.track(frames, ROI)
+    assert {"sigma_x", "sigma_y"} <= set(df.columns) and (df["sigma_x"].iloc[1:] > 0).all()
