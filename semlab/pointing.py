@@ -27,11 +27,12 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from semlab.control import AxisLoop, check_in_frame, tracked_position
+from semlab.control import REACH_TOLERANCE, AxisLoop, check_in_frame, tracked_position
 from semlab.measure import default_tracker, start_point
+from semlab.protocols import Positioner
 
-__all__ = ["POINT_COLUMNS", "PointServo", "ProbeMove", "image_jacobian", "move_probe_to", "move_probes_to",
-           "point_metrics"]
+__all__ = ["POINT_COLUMNS", "POSITIONER_PARAMS", "PointServo", "ProbeMove", "check_positioner_reach",
+           "image_jacobian", "move_probe_to", "move_probes_to", "point_metrics"]
 
 #: The contract's columns, first in every result (the command of each axis, ``u_0, u_1, ...``, follows).
 POINT_COLUMNS = ("frame", "t", "x", "y", "target_x", "target_y", "error_px", "ok")
@@ -40,6 +41,8 @@ POINT_COLUMNS = ("frame", "t", "x", "y", "target_x", "target_y", "error_px", "ok
 MIN_AXIS_ANGLE_DEG = 10.0
 #: Parameters of the one-axis law that move_probe_to passes on to each axis (see VisualServo).
 LOOP_PARAMS = ("feedforward", "pid", "creep", "ki_fine", "fine_band_px", "ff_margin", "max_slew_v", "max_step_px")
+#: Parameters of :func:`semlab.positioning.move_positioner_to` that the positioner form passes on.
+POSITIONER_PARAMS = ("gain", "deadband_px", "max_step_px", "warmup_frames", "tracker", "progress")
 
 
 def image_jacobian(models) -> np.ndarray:
@@ -227,8 +230,10 @@ def move_probe_to(microscope, actuator, roi, target_xy, *, model, n_frames=60, *
     Parameters
     ----------
     microscope : Microscope
-    actuator : sequence of Axis
-        The manipulator's axes that move the tip in the image (e.g. its x and y piezos).
+    actuator : sequence of Axis, or Positioner
+        The manipulator's axes that move the tip in the image (e.g. its x and y piezos), or a closed-loop
+        positioner (:class:`semlab.protocols.Positioner`, relative moves in nm), servoed by
+        :func:`semlab.positioning.move_positioner_to` with ``model`` its calibration.
     roi : (x, y, w, h)
         The probe's ROI in the current frame; its centre point is what goes to the target.
     target_xy : (float, float)
@@ -237,12 +242,16 @@ def move_probe_to(microscope, actuator, roi, target_xy, *, model, n_frames=60, *
         ``model[i]`` fitted on ``actuator[i]`` (each characterised on its own axis): their measured image
         directions make the image Jacobian (:func:`image_jacobian`, not assumed orthogonal), their
         inverses the feed-forward. Each is the shadow of its axis and follows it through the move.
+        For a positioner: its :class:`~semlab.positioning.PositionerCalibration`
+        (:func:`semlab.calibrate_positioner`).
     n_frames : int
         Rows in the result; frame 0 is the frame the ROI refers to.
     **params
         ``tracker``, ``progress`` (a tqdm bar) and the one-axis law's :data:`LOOP_PARAMS`
         (``feedforward``, ``pid``, ``creep``, ``ki_fine``, ``fine_band_px``, ``ff_margin``,
-        ``max_slew_v``, ``max_step_px``; see :class:`~semlab.control.VisualServo`).
+        ``max_slew_v``, ``max_step_px``; see :class:`~semlab.control.VisualServo`). For a positioner
+        :data:`POSITIONER_PARAMS` (``gain``, ``deadband_px``, ``max_step_px``, ``warmup_frames``,
+        ``tracker``, ``progress``).
 
     Returns
     -------
@@ -253,6 +262,10 @@ def move_probe_to(microscope, actuator, roi, target_xy, *, model, n_frames=60, *
         axis held its last command), ``at_limit`` (an axis limit clipped a command), ``stage``.
         ``error_px`` is the distance from the measured position to the target (NaN when ``ok`` is
         False). ``attrs``: ``jacobian, origin, target, axes, models, feedforward, frame_period``.
+        For a positioner the same columns: ``u_0, u_1`` are the commanded offset (nm, the positioner's
+        axes, from frame 0) in effect while the frame was acquired, ``disp_0, disp_1`` the measured one
+        (nm, through the calibration), then ``move_positioner_to``'s own columns (``dx_nm, dy_nm`` the
+        move sent after the frame, ``clipped``, ``reason``, ...).
 
     Raises
     ------
@@ -260,6 +273,9 @@ def move_probe_to(microscope, actuator, roi, target_xy, *, model, n_frames=60, *
         A NaN target, a move that would take the ROI out of the frame, a move some axis cannot make within
         its limits (before anything moves, with the reason), nearly parallel axes, models fitted on other
         axes, or a tracker that reports a NaN position as valid.
+    TypeError
+        An actuator that is neither a sequence of axes nor a positioner, a positioner without a
+        calibration, or parameters the actuator's servo does not take.
 
     Examples
     --------
@@ -267,8 +283,8 @@ def move_probe_to(microscope, actuator, roi, target_xy, *, model, n_frames=60, *
     >>> resp = move_probe_to(rig.microscope, axes, roi, (300.0, 240.0), model=[mx, my])  # doctest: +SKIP
     >>> point_metrics(resp)[["response_frames_0p5px", "final_error_px"]]              # doctest: +SKIP
     """
-    # A closed-loop positioner (semlab.protocols.Positioner) branches off here to its own servo, with
-    # model= its calibration; everything below drives piezo axes through their hysteresis models.
+    if isinstance(actuator, Positioner):  # a closed-loop stepper: its own servo, model= its calibration
+        return _move_positioner_to(microscope, actuator, roi, target_xy, model, _n_frames(n_frames), params)
     axes, models = _axes_and_models(actuator, model)
     n_frames = _n_frames(n_frames)
     progress = bool(params.pop("progress", False))
@@ -279,6 +295,60 @@ def move_probe_to(microscope, actuator, roi, target_xy, *, model, n_frames=60, *
         servo.observe(microscope.grab())
     servo.finish()
     return servo.to_frame()
+
+
+def check_positioner_reach(positioner, calibration, roi, target_xy) -> None:
+    """Raise ValueError (with the reason) when the positioner's travel limits cannot reach the target.
+
+    The move is ``J^-1 (target - centre)`` through the calibration; it is refused only when it leaves the
+    travel by more than :data:`~semlab.control.REACH_TOLERANCE` of its length on some axis (the
+    calibration can be that far off; anything short of it is tried, and the servo clips at the limit).
+    Nothing is checked when the positioner does not know its limits or its position.
+    """
+    limits, pos = getattr(positioner, "limits", None), getattr(positioner, "position_nm", None)
+    if limits is None or pos is None:
+        return
+    du = calibration.to_positioner(np.asarray(target_xy, float) - start_point(roi))
+    lo, hi = np.asarray(limits, float).T
+    end = np.asarray(pos, float) + du
+    slack = REACH_TOLERANCE * np.abs(du)
+    for i, name in enumerate("xy"):
+        if not lo[i] - slack[i] <= end[i] <= hi[i] + slack[i]:
+            raise ValueError(
+                f"the target needs the positioner's {name} axis at {end[i]:.6g} nm (a move of {du[i]:+.6g} nm "
+                f"from {pos[i]:.6g}), outside its travel [{lo[i]:.6g}, {hi[i]:.6g}] nm even allowing the "
+                f"calibration {REACH_TOLERANCE:.0%} error"
+            )
+
+
+def _move_positioner_to(microscope, positioner, roi, target_xy, calibration, n_frames, params) -> pd.DataFrame:
+    """The positioner form of :func:`move_probe_to`: checks, then
+    :func:`semlab.positioning.move_positioner_to`, its rows given the contract's columns."""
+    from semlab.positioning import PositionerCalibration, move_positioner_to
+
+    if not isinstance(calibration, PositionerCalibration):
+        raise TypeError("for a positioner, model= is its PositionerCalibration (semlab.calibrate_positioner), "
+                        f"got {type(calibration).__name__}")
+    unknown = set(params) - set(POSITIONER_PARAMS)
+    if unknown:
+        raise TypeError(f"parameter(s) {sorted(unknown)} do not apply to a positioner; "
+                        f"allowed: {sorted(POSITIONER_PARAMS)}")
+    target = _target_point(target_xy)
+    check_positioner_reach(positioner, calibration, roi, target)
+    df = move_positioner_to(microscope, positioner, roi, target, calibration=calibration, n_frames=n_frames,
+                            **params)
+    sent = df[["dx_nm", "dy_nm"]].cumsum().shift(1, fill_value=0.0).to_numpy()  # in effect at each frame
+    p = df[["x", "y"]].to_numpy(float)
+    disp = calibration.to_positioner((p - p[0]).T).T
+    extra = {"u_0": sent[:, 0], "u_1": sent[:, 1], "disp_0": disp[:, 0], "disp_1": disp[:, 1]}
+    extra["at_limit"] = df["reason"].astype(str).str.contains("travel limits").to_numpy()
+    extra["stage"] = np.where(df["frame"].to_numpy() == 0, "start", "servo")
+    rest = [c for c in df.columns if c not in POINT_COLUMNS and c not in extra]
+    out = pd.concat([df[list(POINT_COLUMNS)], pd.DataFrame(extra, index=df.index), df[rest]], axis=1)
+    out.attrs.update(df.attrs, jacobian=calibration.jacobian.tolist(), origin=tuple(start_point(roi)),
+                     target=tuple(target), axes=["x", "y"], models=["positioner calibration"],
+                     feedforward=False, form="positioner")
+    return out
 
 
 def _n_frames(n_frames) -> int:
@@ -335,6 +405,9 @@ def move_probes_to(microscope, moves, *, n_frames=60, progress=False, **params) 
     for k, mv in enumerate(moves):
         if not isinstance(mv, ProbeMove):
             raise TypeError(f"moves[{k}] must be a ProbeMove, got {type(mv).__name__}")
+        if isinstance(mv.actuator, Positioner):
+            raise TypeError(f"moves[{k}] drives a positioner: move_probes_to servoes piezo axes; move a "
+                            "positioner with move_probe_to")
         axes, models = _axes_and_models(mv.actuator, mv.model)
         if seen & {id(a) for a in axes}:
             raise ValueError(f"moves[{k}] drives an axis another probe drives too")

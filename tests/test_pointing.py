@@ -305,12 +305,12 @@ def test_probes_must_not_share_an_axis(stage_at_mid):
 # ---------------------------------------------------------------------------------------------
 
 
-def test_simulated_rig_two_axes_to_a_point_by_the_truth():
-    pytest.importorskip("semlab.tracking")
+def _rig_ready(seed):
+    """A simulated rig whose probe 0 is characterised on both axes and parked mid-range; its ROI."""
     from semlab.roi import roi_from_click
     from semlab.sim import SimulatedRig
 
-    rig = SimulatedRig(seed=5)
+    rig = SimulatedRig(seed=seed)
     frame = rig.microscope.grab()
     tip = rig.truth.query("probe == 0")[["x", "y"]].to_numpy()[0]
     roi = roi_from_click(frame, tip, size=160)
@@ -331,9 +331,33 @@ def test_simulated_rig_two_axes_to_a_point_by_the_truth():
     tip0 = rig.truth.query("probe == 0")[["x", "y"]].to_numpy()[0]
     roi = roi_from_click(frame, tip0, size=160)
     centre = np.array([roi[0] + (roi[2] - 1) / 2, roi[1] + (roi[3] - 1) / 2])
+    return rig, axes, models, roi, centre, tip0
+
+
+def test_simulated_rig_two_axes_to_a_point_by_the_truth():
+    rig, axes, models, roi, centre, tip0 = _rig_ready(5)
     offset = np.array([35.0, -30.0])
     resp = move_probe_to(rig.microscope, axes, roi, tuple(centre + offset), model=models, n_frames=25)
     moved = rig.truth.query("probe == 0")[["x", "y"]].to_numpy()[0] - tip0
     assert resp["ok"].all()
     # the truth within 0.5 px: the tracker's error after a 46-px move on this scene is ~0.1-0.3 px
     assert np.hypot(*(moved - offset)) < 0.5
+
+
+def test_frames_the_tracker_finds_too_uncertain_hold_every_axis():
+    # The tracker flags a frame whose position it cannot vouch for (sigma above max_sigma) with ok=False and
+    # no position: the servo must not act on it. A max_sigma no fit reaches flags every frame after the first.
+    from semlab.tracking import Tracker
+
+    rig, axes, models, roi, centre, tip0 = _rig_ready(6)
+    for feedforward in (True, False):
+        resp = move_probe_to(rig.microscope, axes, roi, tuple(centre + (30.0, 20.0)), model=models, n_frames=8,
+                             tracker=Tracker(max_sigma=1e-9), feedforward=feedforward)
+        assert not resp["ok"].iloc[1:].any() and resp["held"].iloc[1:].all()
+        assert resp[["x", "y", "error_px"]].iloc[1:].isna().all().all()
+        # only the command sent on frame 0 (from the ROI the caller gave): nothing after a flagged frame
+        for col, axis in zip(("u_0", "u_1"), axes):
+            assert resp[col].iloc[1:].nunique() == 1 and axis.command == resp[col].iloc[-1]
+        tip = rig.truth.query("probe == 0")[["x", "y"]].to_numpy()[0]
+        roi = (roi[0] + round(tip[0] - tip0[0]), roi[1] + round(tip[1] - tip0[1]), roi[2], roi[3])
+        centre, tip0 = centre + np.round(tip - tip0), tip
