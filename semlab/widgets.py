@@ -705,6 +705,11 @@ def _hide(image):
     image.value = b""
 
 
+def _final_frames(resp) -> int:
+    """Frames at the end of a panel run for its final figures: a third of it, 2 to 30 (the paper's 30)."""
+    return min(30, max(2, len(resp) // 3))
+
+
 def _servo_readout(label, parts):
     return "<div>" + " · ".join([f"<b>{html.escape(label)}</b>", *parts]) + "</div>"
 
@@ -890,6 +895,18 @@ class ServoPanel:
         gains = f", K=({c['kp'].value:g}, {c['ki'].value:g}, {c['kd'].value:g})" if c["custom_pid"].value else ""
         return f"{'FF+PID' if c['feedforward'].value else 'PID only'}, {what}{gains}"
 
+    def _attempt(self, busy: str, run):
+        """Run one servo call; its response, or None when it was refused (the reason shown)."""
+        self.readout.value = busy
+        try:
+            resp = run()
+        except (ValueError, TypeError, RuntimeError) as err:
+            self._refused(err)
+            return None
+        self.error = ""
+        self._follow(resp)
+        return resp
+
     def _refused(self, err):
         self.error = str(err)
         self.readout.value = f"<b>refused</b>: {html.escape(self.error)}"
@@ -901,18 +918,13 @@ class ServoPanel:
 
         c = self.controls
         k = int(c["step_axis"].value)
-        self.readout.value = "running…"
-        try:
-            resp = step_response(self.microscope, self.axes[k], self.roi(), float(c["step_px"].value),
-                                 model=self.models[k], feedforward=bool(c["feedforward"].value),
-                                 n_frames=int(c["n_frames"].value), **self._run_params())
-        except (ValueError, TypeError, RuntimeError) as err:
-            self._refused(err)
+        resp = self._attempt("running…", lambda: step_response(
+            self.microscope, self.axes[k], self.roi(), float(c["step_px"].value), model=self.models[k],
+            feedforward=bool(c["feedforward"].value), n_frames=int(c["n_frames"].value), **self._run_params()))
+        if resp is None:
             return None
-        self.error = ""
         self.response = resp
-        self._follow(resp)
-        self.metrics = step_metrics(resp, final_frames=min(30, max(2, len(resp) // 3)))
+        self.metrics = step_metrics(resp, final_frames=_final_frames(resp))
         along = f" along {self.models[k].axis}" if len(self.models) > 1 else ""
         label = self._label(f"{c['step_px'].value:+.0f} px{along}")
         self.runs.append((label, resp, self.metrics))
@@ -927,20 +939,19 @@ class ServoPanel:
         from .pointing import move_probe_to, point_metrics
 
         c = self.controls
-        self.readout.value = "moving…"
-        try:
+
+        def run():
             if len(self.axes) < 2:
                 raise ValueError("a point in the image needs two axes; this panel drives one (steps only)")
-            resp = move_probe_to(self.microscope, self.axes, self.roi(), target_xy, model=self.models,
+            return move_probe_to(self.microscope, self.axes, self.roi(), target_xy, model=self.models,
                                  n_frames=int(c["n_frames"].value), feedforward=bool(c["feedforward"].value),
                                  **self._run_params())
-        except (ValueError, TypeError, RuntimeError) as err:
-            self._refused(err)
+
+        resp = self._attempt("moving…", run)
+        if resp is None:
             return None
-        self.error = ""
         self.point_response = resp
-        self._follow(resp)
-        self.point_metrics = point_metrics(resp, final_frames=min(30, max(2, len(resp) // 3)))
+        self.point_metrics = point_metrics(resp, final_frames=_final_frames(resp))
         label = self._label(f"to ({float(target_xy[0]):.0f}, {float(target_xy[1]):.0f})")
         self.moves.append((label, resp, self.point_metrics))
         self._draw_points()

@@ -7,54 +7,32 @@ that only the test knows). Needs ``fibsem`` (``make setup`` installs it); skips 
 from __future__ import annotations
 
 import math
-import os
 
 import numpy as np
 import pytest
 
-try:
-    import fibsem  # noqa: F401
-except ImportError as err:
-    if os.environ.get("CI"):
-        raise RuntimeError(f"CI must install the fibsem extra (make setup); importing fibsem failed: {err}") from err
-    pytest.skip(f'fibsem is not installed ({err}): pip install "semlab[fibsem]"', allow_module_level=True)
-
-from fibsem.structures import FibsemManipulatorPosition, ImageSettings
+# skips this module as well when fibsem is missing (outside CI)
+import test_instruments_fibsem as adapter_tests
 
 import semlab
 from semlab.instruments.demo import SimulatedNeedle
-from semlab.instruments.fibsem import FibsemManipulator, FibsemMicroscope, connect
+from semlab.instruments.fibsem import FibsemManipulator, FibsemMicroscope
 from semlab.pointing import POINT_COLUMNS, ProbeMove, move_probe_to, move_probes_to, point_metrics
 from semlab.positioning import WARMUP_FRAMES, calibrate_positioner
 from semlab.protocols import Positioner
 from semlab.roi import roi_from_click
 
-WIDTH, HEIGHT, PIXEL_NM = 640, 480, 50.0
-SETTINGS = {"resolution": (WIDTH, HEIGHT), "dwell_time": 1e-7, "hfw": WIDTH * PIXEL_NM * 1e-9}
+# fibsem's Demo, its manipulator at the origin for each test, its needle removed after: the adapter tests' fixtures
+fib, demo = adapter_tests.fib, adapter_tests.demo
+
 ROI = 200
-
-
-@pytest.fixture(scope="module")
-def fib(tmp_path_factory):
-    microscope, _settings = connect("Demo", session_path=tmp_path_factory.mktemp("fibsem"))
-    return microscope
-
-
-@pytest.fixture
-def demo(fib):
-    fib.move_manipulator_absolute(FibsemManipulatorPosition(x=0.0, y=0.0, z=0.0))
-    yield fib
-    needle = fib.__dict__.pop("semlab_needle", None)
-    if needle is not None:
-        needle.remove()
-    fib.move_manipulator_absolute(FibsemManipulatorPosition(x=0.0, y=0.0, z=0.0))
 
 
 def calibrated(demo, seed=0, limits=None, **needle):
     """The bridge, microscope, manipulator, ROI and calibration; the needle back at its start after."""
     bridge = SimulatedNeedle(demo, seed=seed, **needle)
     demo.semlab_needle = bridge  # removed by the fixture
-    scope = FibsemMicroscope(demo, image_settings=ImageSettings(**SETTINGS))
+    scope = FibsemMicroscope(demo, image_settings=adapter_tests.ImageSettings(**adapter_tests.SETTINGS))
     arm = FibsemManipulator(demo, limits=limits)
     roi = roi_from_click(scope.grab(), bridge.tip0, size=ROI)
     return bridge, scope, arm, roi, calibrate_positioner(scope, arm, roi)
