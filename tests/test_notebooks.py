@@ -235,29 +235,42 @@ def _claims_04(r):
 
 
 def _claims_05(r):
+    full = r["n_steps_per_mode"] == 6  # fast mode: one repetition of the +-100-px pair, the full run three
     # "The PID alone needs at least five frames to bring the probe within ±1 px of a 100-px step; with feed-forward
     # the probe is there one or two frames after the step, on every step"
     assert r["pid_frames_to_1px_min"] >= 5 and r["ff_frames_to_1px_max"] <= 2 and r["ff_faster_than_pid_every_step"]
     # "The step back to where the characterisation ended is made, not refused"
     assert r["back_steps_made"] == r["n_steps_per_mode"] // 2 >= 1
-    # "By the ground truth the feed-forward steps are within ±0.5 px by the third frame and end within 0.3 px of
-    # the target, their spread below 0.2 px, far below the paper's 0.46 px; the PID alone ends as close, only later"
-    assert r["ff_true_frames_to_0p5px_max"] <= 3 and r["ff_true_final_error_max_px"] < 0.3
-    assert r["ff_true_final_std_max_px"] < 0.2 and r["pid_true_final_error_max_px"] < 0.3
-    # "The tracker's reading of where a step ended and the truth differ by less than 0.3 px"
-    assert r["ff_tracker_minus_true_final_max_px"] < 0.3
+    # "By the ground truth every feed-forward step ends within 0.3 px of the target, its spread below 0.2 px, far
+    # below the paper's 0.46 px; the PID-only steps end within 0.4 px"
+    assert r["ff_true_final_error_max_px"] < 0.3 and r["ff_true_final_std_max_px"] < 0.2
+    assert r["pid_true_final_error_max_px"] < 0.4
+    # "In fast mode every feed-forward step is within ±0.5 px by the truth by the sixth frame; in the full run five of
+    # the six are, and the sixth is not"
+    assert r["ff_true_steps_within_0p5px_by_frame_6"] == (5 if full else r["n_steps_per_mode"])
+    # "... and the truth enters the band only much later": after the sixth frame
+    if full:
+        assert r["ff_true_frames_to_0p5px_max"] > 6
+    # "The tracker reads the end of every feed-forward step within 0.05 px of the target, and its reading and the
+    # truth differ by less than 0.35 px"
+    assert r["ff_tracker_final_error_max_px"] < 0.05 and r["ff_tracker_minus_true_final_max_px"] < 0.35
 
 
 def _claims_10(r):
+    full = r["n_frames"] == 60  # fast mode: 30 frames per move
     # "the angle between the x and y axes comes out at the rig's 97°, within half a degree ... off by about 12 % of
     # its length (sin 7°)"
     assert r["axis_angle_rig_deg"] == 97.0 and abs(r["axis_angle_measured_deg"] - 97.0) < 0.5
     assert round(r["orthogonal_assumption_miss_fraction"], 2) == 0.12
-    # "every move, a single probe's or all four probes' at once, is within ±0.5 px by the ground truth by the sixth
-    # frame; by the truth each ends within 0.5 px of its target"
-    assert r["single_moves"] == 3
-    assert r["single_true_frames_to_0p5px_max"] <= 6 and r["four_true_frames_to_0p5px_max"] <= 6
-    assert r["true_final_error_max_px"] < 0.5
+    # "By the ground truth every move, a single probe's or all four probes' at once, ends within 0.3 px of its target"
+    assert r["single_moves"] == 3 and r["n_moves"] == 7
+    assert r["true_final_error_max_px"] < 0.3
+    # "The four probes' moves are within ±0.5 px by the sixth frame; of the single probe's three moves, all are in
+    # fast mode, and in the full run one is not"
+    assert r["four_true_frames_to_0p5px_max"] <= 6
+    assert r["moves_true_within_0p5px_by_frame_6"] == (6 if full else 7)
+    if full:
+        assert r["single_true_frames_to_0p5px_max"] > 6
     # "The tracker reads the ends closer to the targets than they are, by about a tenth of a pixel on average":
     # about = 0.05-0.3 px
     assert r["tracker_final_error_max_px"] < r["true_final_error_max_px"]
