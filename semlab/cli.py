@@ -11,11 +11,12 @@ import hashlib
 import json
 import math
 import os
-import platform
 import sys
 import time
 from datetime import UTC, datetime
 from pathlib import Path
+
+from semlab.environment import describe as describe_environment
 
 __all__ = [
     "EXIT_INPUT",
@@ -626,7 +627,7 @@ def _track_record(args, argv, params, seq, res, roi, roi_source, out, tmp_csv, s
         },
         "conventions": "x, y: where the ROI centre point of frame 0 has moved to; pixel "
         "centres at integer coordinates, x right, y down; x_nm = x * pixel_size_nm",
-        "environment": _environment(),
+        "environment": describe_environment(),
         "elapsed_s": round(time.time() - started, 3),
     }
 
@@ -800,7 +801,7 @@ def _cmd_evaluate(args, argv) -> int:
                 "scheduler": df.attrs.get("scheduler"),
                 "sequences": df.attrs.get("sequences"),
                 "output": {"csv": out.name, "sha256": _sha256(tmp_csv), "columns": list(df.columns), "rows": len(df)},
-                "environment": {**_environment(), **_dask_versions()},
+                "environment": {**describe_environment(), **_dask_versions()},
                 "elapsed_s": round(time.time() - started, 3),
             }
             tmp_json.write_text(json.dumps(record, indent=1, default=str) + "\n")
@@ -844,15 +845,6 @@ def _save_corpus_figure(summary, path: Path, suffix: str) -> None:
     plot_corpus(summary, ax)
     fig.savefig(path, format=(suffix.lstrip(".") or "png"), dpi=120)
     plt.close(fig)
-
-
-def _environment() -> dict:
-    env = {"python": platform.python_version(), "platform": platform.platform()}
-    for name in ("numpy", "scipy", "pandas", "cv2", "skimage", "tifffile"):
-        mod = sys.modules.get(name)
-        if mod is not None:
-            env[name] = getattr(mod, "__version__", "?")
-    return env
 
 
 # ----------------------------------------------------------------------------------------------
