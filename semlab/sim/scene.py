@@ -24,6 +24,7 @@ __all__ = [
     "DEFAULT_PROBE_ANGLES_DEG",
     "Clutter",
     "ProbeGeometry",
+    "clip_polygon",
     "make_substrate",
     "probe_bbox",
     "probe_signed_distance",
@@ -189,8 +190,22 @@ def probe_signed_distance(X, Y, tip_xy, angle_rad, tip_radius_px, half_angle_rad
     return d, v_signed / half_width
 
 
-def _clip_polygon(points, xmin, xmax, ymin, ymax):
-    """Sutherland-Hodgman clipping of a convex polygon to an axis-aligned rectangle."""
+def clip_polygon(points, xmin, xmax, ymin, ymax) -> list[tuple[float, float]]:
+    """Sutherland-Hodgman clipping of a convex polygon to an axis-aligned rectangle.
+
+    Parameters
+    ----------
+    points : sequence of (x, y)
+        The convex polygon's vertices, in order (either orientation).
+    xmin, xmax, ymin, ymax : float
+        The rectangle (closed: a vertex on its boundary is inside).
+
+    Returns
+    -------
+    list of (x, y)
+        The clipped polygon's vertices, in the input's orientation; ``[]`` when the polygon and the
+        rectangle do not overlap.
+    """
     def clip(pts, inside, cross):
         out = []
         for i, p in enumerate(pts):
@@ -238,7 +253,7 @@ def probe_bbox(tip_xy, angle_rad, tip_radius_px, half_angle_rad, margin_px, widt
     half = far * math.tan(half_angle_rad)
     bx, by = cx - far * c, cy - far * s
     tri = [(cx, cy), (bx - half * s, by + half * c), (bx + half * s, by - half * c)]
-    poly = _clip_polygon(tri, -R, width - 1 + R, -R, height - 1 + R)
+    poly = clip_polygon(tri, -R, width - 1 + R, -R, height - 1 + R)
     if not poly:
         return None
     xs = [p[0] for p in poly]

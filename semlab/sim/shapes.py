@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .scene import _clip_polygon, _edge_terms, _grid
+from .scene import _edge_terms, _grid, clip_polygon
 
 __all__ = ["AFMTip", "BluntProbe", "GripperJaws", "ProbeShape", "polygon_signed_distance",
            "render_shape", "shape_signed_distance"]
@@ -258,7 +258,7 @@ def render_shape(buf, shape: ProbeShape, tip_xy, angle_rad, pixel_size_nm, sigma
         margin += float(np.max(np.abs(row_shift)))
     boxes = []
     for P in shape.polygons_px(pixel_size_nm, far_px):
-        clipped = _clip_polygon([tuple(q) for q in _to_image(P, (tx, ty), angle_rad)],
+        clipped = clip_polygon([tuple(q) for q in _to_image(P, (tx, ty), angle_rad)],
                                 -margin, w - 1 + margin, -margin, h - 1 + margin)
         if clipped:
             xs, ys = zip(*clipped)
