@@ -56,6 +56,14 @@ Errors are one line on stderr: 'semlab: error: <file>: <reason>'. Output files a
 temporary name and renamed only when complete, so a failed run leaves no partial output.
 """
 
+#: Every subcommand with its one-line description, as ``semlab --help`` lists them: each fits one
+#: line of an 80-column terminal (argparse indents it 14 characters, so 64 at most).
+COMMAND_HELP = {
+    "track": "track a target through a recorded sequence (CSV + JSON sidecar)",
+    "info": "print size, dtype, frames and pixel size (nm) of image files",
+    "evaluate": "run trackers on the scene-family corpus (CSV + JSON sidecar)",
+}
+
 TRACK_DESCRIPTION = """\
 Track a target (a probe tip) through a recorded sequence of SEM frames and write one CSV row per
 frame: frame, x, y, x_nm, y_nm, score, ok, file.
@@ -274,7 +282,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="semlab",
         description="semlab: sub-pixel visual tracking in a scanning electron microscope "
-        "(after Ru et al., 2012). Commands: 'track' a recorded sequence, 'info' on image files.",
+        "(after Ru et al., 2012).",
         epilog=EXIT_CODES + "\nRun 'semlab COMMAND --help' for the options of a command.",
         formatter_class=fmt,
     )
@@ -284,7 +292,7 @@ def build_parser() -> argparse.ArgumentParser:
     methods, default_method = _tracker_methods()
     t = sub.add_parser(
         "track",
-        help="track a target through a recorded sequence and write a CSV (+ JSON sidecar)",
+        help=COMMAND_HELP["track"],
         description=TRACK_DESCRIPTION,
         epilog=TRACK_EXAMPLES + "\n" + EXIT_CODES,
         formatter_class=fmt,
@@ -353,7 +361,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     i = sub.add_parser(
         "info",
-        help="print size, dtype, frame count and pixel size (nm) of image files",
+        help=COMMAND_HELP["info"],
         description=INFO_DESCRIPTION,
         epilog=EXIT_CODES,
         formatter_class=fmt,
@@ -723,7 +731,7 @@ def _seeds_arg(text: str) -> list[int]:
 
 
 def _add_evaluate_parser(sub, fmt) -> None:
-    e = sub.add_parser("evaluate", help="run trackers on the scene-family corpus and write a CSV (+ JSON sidecar)",
+    e = sub.add_parser("evaluate", help=COMMAND_HELP["evaluate"],
                        description=EVALUATE_DESCRIPTION, epilog=EVALUATE_EXAMPLES, formatter_class=fmt)
     e.add_argument("--families", metavar="NAME,...", help="families (default: all; see semlab.evaluation.FAMILIES)")
     seeds = e.add_mutually_exclusive_group()
