@@ -26,6 +26,7 @@ __all__ = [
     "ProbeGeometry",
     "clip_polygon",
     "make_substrate",
+    "polygons_bbox",
     "probe_bbox",
     "probe_signed_distance",
     "render_disc",
@@ -253,15 +254,25 @@ def probe_bbox(tip_xy, angle_rad, tip_radius_px, half_angle_rad, margin_px, widt
     half = far * math.tan(half_angle_rad)
     bx, by = cx - far * c, cy - far * s
     tri = [(cx, cy), (bx - half * s, by + half * c), (bx + half * s, by - half * c)]
-    poly = clip_polygon(tri, -R, width - 1 + R, -R, height - 1 + R)
-    if not poly:
+    return polygons_bbox([tri], R, width, height)
+
+
+def polygons_bbox(polygons, margin_px, width, height):
+    """Bounding box ``(x0, x1, y0, y1)`` (half-open, clipped) of convex polygons dilated by a margin.
+
+    Each polygon is clipped (:func:`clip_polygon`) to the frame grown by ``margin_px``, so a body
+    reaching far beyond the frame counts only where it can touch it; the clipped polygons' box grows by
+    ``margin_px`` and is clipped to the ``width`` x ``height`` frame. ``None`` when nothing reaches in.
+    """
+    m = margin_px
+    pts = [q for P in polygons for q in clip_polygon(P, -m, width - 1 + m, -m, height - 1 + m)]
+    if not pts:
         return None
-    xs = [p[0] for p in poly]
-    ys = [p[1] for p in poly]
-    x0 = max(math.floor(min(xs) - R), 0)
-    x1 = min(math.ceil(max(xs) + R) + 1, width)
-    y0 = max(math.floor(min(ys) - R), 0)
-    y1 = min(math.ceil(max(ys) + R) + 1, height)
+    xs, ys = zip(*pts)
+    x0 = max(math.floor(min(xs) - m), 0)
+    x1 = min(math.ceil(max(xs) + m) + 1, width)
+    y0 = max(math.floor(min(ys) - m), 0)
+    y1 = min(math.ceil(max(ys) + m) + 1, height)
     if x0 >= x1 or y0 >= y1:
         return None
     return x0, x1, y0, y1
