@@ -597,8 +597,9 @@ def _track_table(df, seq):
 def _track_record(args, argv, params, seq, res, roi, roi_source, out, tmp_csv, started) -> dict:
     """The JSON sidecar: how the CSV was made (command, parameters, inputs and their hashes)."""
     shape = seq.frames.shape[1:]
+    from semlab.roi import roi_centre
+
     n_ok = int(res["ok"].sum())
-    x0, y0, w0, h0 = roi
     return {
         "semlab_version": _version(),
         "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
@@ -609,7 +610,7 @@ def _track_record(args, argv, params, seq, res, roi, roi_source, out, tmp_csv, s
         "input_order": "given" if args.keep_order else "natural",
         "roi": list(roi),
         "roi_source": roi_source,
-        "roi_centre_px": [x0 + (w0 - 1) / 2, y0 + (h0 - 1) / 2],
+        "roi_centre_px": list(roi_centre(roi)),
         "click": None if args.click is None else list(args.click),
         "pixel_size_nm": seq.pixel_size_nm,
         "pixel_size_source": seq.pixel_size_source,
