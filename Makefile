@@ -51,6 +51,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_tracking.py
 	$(BIN)/python benchmarks/bench_tracking_seeds.py
 	$(BIN)/python benchmarks/bench_fibsem_demo.py
+	$(BIN)/python benchmarks/bench_four_probes.py
 
 bench-servo: $(STAMP)
 	$(BIN)/python benchmarks/bench_servo.py
