@@ -12,7 +12,7 @@ ARGS   ?=
 ROOT_FLAG := $(shell [ "$$(id -u)" = 0 ] && echo --allow-root)
 PYTEST_ARGS ?=
 
-.PHONY: setup lab test test-fast bench chromium strip lint clean mutate
+.PHONY: setup lab test test-fast bench bench-servo bench-corpus bench-all chromium strip lint clean mutate
 
 setup: $(STAMP)
 
@@ -45,12 +45,21 @@ test: $(STAMP) chromium
 test-fast: $(STAMP)
 	$(BIN)/python -m pytest -m "not notebooks and not browser" $(PYTEST_ARGS)
 
+# A few minutes each; the long servo and corpus runs have their own targets (bench-all: every benchmark).
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_sim.py
 	$(BIN)/python benchmarks/bench_tracking.py
 	$(BIN)/python benchmarks/bench_tracking_seeds.py
+	$(BIN)/python benchmarks/bench_fibsem_demo.py
+	$(BIN)/python benchmarks/bench_four_probes.py
+
+bench-servo: $(STAMP)
 	$(BIN)/python benchmarks/bench_servo.py
+
+bench-corpus: $(STAMP)
 	nice -n 10 $(BIN)/python benchmarks/bench_corpus.py
+
+bench-all: bench bench-servo bench-corpus
 
 # Mutation testing of the core modules ([tool.mutmut] in pyproject.toml; slow, not in CI: the fixed
 # sample in tests/test_mutants.py is). Niced, 2 workers; `make mutate ARGS='semlab.control.*'` runs a subset.

@@ -11,11 +11,12 @@ import hashlib
 import json
 import math
 import os
-import platform
 import sys
 import time
 from datetime import UTC, datetime
 from pathlib import Path
+
+from semlab.environment import describe as describe_environment
 
 __all__ = [
     "EXIT_INPUT",
@@ -54,6 +55,14 @@ exit codes:
 Errors are one line on stderr: 'semlab: error: <file>: <reason>'. Output files are written under a
 temporary name and renamed only when complete, so a failed run leaves no partial output.
 """
+
+#: Every subcommand with its one-line description, as ``semlab --help`` lists them: each fits one
+#: line of an 80-column terminal (argparse indents it 14 characters, so 64 at most).
+COMMAND_HELP = {
+    "track": "track a target through a recorded sequence (CSV + JSON sidecar)",
+    "info": "print size, dtype, frames and pixel size (nm) of image files",
+    "evaluate": "run trackers on the scene-family corpus (CSV + JSON sidecar)",
+}
 
 TRACK_DESCRIPTION = """\
 Track a target (a probe tip) through a recorded sequence of SEM frames and write one CSV row per
@@ -275,7 +284,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="semlab",
         description="semlab: sub-pixel visual tracking in a scanning electron microscope "
-        "(after Ru et al., 2012). Commands: 'track' a recorded sequence, 'info' on image files.",
+        "(after Ru et al., 2012).",
         epilog=EXIT_CODES + "\nRun 'semlab COMMAND --help' for the options of a command.",
         formatter_class=fmt,
     )
@@ -285,7 +294,7 @@ def build_parser() -> argparse.ArgumentParser:
     methods, default_method = _tracker_methods()
     t = sub.add_parser(
         "track",
-        help="track a target through a recorded sequence and write a CSV (+ JSON sidecar)",
+        help=COMMAND_HELP["track"],
         description=TRACK_DESCRIPTION,
         epilog=TRACK_EXAMPLES + "\n" + EXIT_CODES,
         formatter_class=fmt,
@@ -360,7 +369,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     i = sub.add_parser(
         "info",
-        help="print size, dtype, frame count and pixel size (nm) of image files",
+        help=COMMAND_HELP["info"],
         description=INFO_DESCRIPTION,
         epilog=EXIT_CODES,
         formatter_class=fmt,
@@ -601,8 +610,9 @@ def _track_table(df, seq, *, sigma=False):
 def _track_record(args, argv, params, seq, res, roi, roi_source, out, tmp_csv, started) -> dict:
     """The JSON sidecar: how the CSV was made (command, parameters, inputs and their hashes)."""
     shape = seq.frames.shape[1:]
+    from semlab.roi import roi_centre
+
     n_ok = int(res["ok"].sum())
-    x0, y0, w0, h0 = roi
     return {
         "semlab_version": _version(),
         "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
@@ -613,7 +623,7 @@ def _track_record(args, argv, params, seq, res, roi, roi_source, out, tmp_csv, s
         "input_order": "given" if args.keep_order else "natural",
         "roi": list(roi),
         "roi_source": roi_source,
-        "roi_centre_px": [x0 + (w0 - 1) / 2, y0 + (h0 - 1) / 2],
+        "roi_centre_px": list(roi_centre(roi)),
         "click": None if args.click is None else list(args.click),
         "pixel_size_nm": seq.pixel_size_nm,
         "pixel_size_source": seq.pixel_size_source,
@@ -639,7 +649,7 @@ def _track_record(args, argv, params, seq, res, roi, roi_source, out, tmp_csv, s
         },
         "conventions": "x, y: where the ROI centre point of frame 0 has moved to; pixel "
         "centres at integer coordinates, x right, y down; x_nm = x * pixel_size_nm",
-        "environment": _environment(),
+        "environment": describe_environment(),
         "elapsed_s": round(time.time() - started, 3),
     }
 
@@ -735,7 +745,7 @@ def _seeds_arg(text: str) -> list[int]:
 
 
 def _add_evaluate_parser(sub, fmt) -> None:
-    e = sub.add_parser("evaluate", help="run trackers on the scene-family corpus and write a CSV (+ JSON sidecar)",
+    e = sub.add_parser("evaluate", help=COMMAND_HELP["evaluate"],
                        description=EVALUATE_DESCRIPTION, epilog=EVALUATE_EXAMPLES, formatter_class=fmt)
     e.add_argument("--families", metavar="NAME,...", help="families (default: all; see semlab.evaluation.FAMILIES)")
     seeds = e.add_mutually_exclusive_group()
@@ -813,7 +823,7 @@ def _cmd_evaluate(args, argv) -> int:
                 "scheduler": df.attrs.get("scheduler"),
                 "sequences": df.attrs.get("sequences"),
                 "output": {"csv": out.name, "sha256": _sha256(tmp_csv), "columns": list(df.columns), "rows": len(df)},
-                "environment": {**_environment(), **_dask_versions()},
+                "environment": {**describe_environment(), **_dask_versions()},
                 "elapsed_s": round(time.time() - started, 3),
             }
             tmp_json.write_text(json.dumps(record, indent=1, default=str) + "\n")
@@ -857,15 +867,6 @@ def _save_corpus_figure(summary, path: Path, suffix: str) -> None:
     plot_corpus(summary, ax)
     fig.savefig(path, format=(suffix.lstrip(".") or "png"), dpi=120)
     plt.close(fig)
-
-
-def _environment() -> dict:
-    env = {"python": platform.python_version(), "platform": platform.platform()}
-    for name in ("numpy", "scipy", "pandas", "cv2", "skimage", "tifffile"):
-        mod = sys.modules.get(name)
-        if mod is not None:
-            env[name] = getattr(mod, "__version__", "?")
-    return env
 
 
 # ----------------------------------------------------------------------------------------------

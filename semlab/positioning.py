@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from semlab.measure import default_tracker, read_result, start_point
 from semlab.protocols import Positioner, ScaledMicroscope, TimedMicroscope, as_finite, frame_time
 
 __all__ = [
@@ -181,32 +182,12 @@ def _check_positioner(positioner) -> None:
                         f"resolution_nm, position_nm); got {type(positioner).__name__}")
 
 
-def _default_tracker(tracker):
-    if tracker is None:
-        from semlab.tracking import Tracker
-
-        return Tracker()
-    if not (callable(getattr(tracker, "init", None)) and callable(getattr(tracker, "update", None))):
-        raise TypeError(f"tracker must have init(frame, roi) and update(frame); got {type(tracker).__name__}")
-    return tracker
-
-
-def _roi_centre(roi) -> np.ndarray:
-    try:
-        x, y, w, h = (float(v) for v in roi)
-    except (TypeError, ValueError):
-        raise ValueError(f"roi must be (x, y, w, h), got {roi!r}") from None
-    if not (all(map(math.isfinite, (x, y, w, h))) and w > 0 and h > 0):
-        raise ValueError(f"roi {roi!r} must have finite coordinates and a positive size")
-    return np.array([x + (w - 1) / 2.0, y + (h - 1) / 2.0])
-
-
 class _Eye:
     """Grab and track; a frame that cannot be grabbed counts as lost (the instrument's message kept)."""
 
     def __init__(self, microscope, tracker, roi):
         self.microscope = microscope
-        self.tracker = _default_tracker(tracker)
+        self.tracker = default_tracker(tracker)
         self.frames = 0
         frame = microscope.grab()
         self.shape = np.shape(frame)
@@ -222,10 +203,10 @@ class _Eye:
         except Exception as err:  # noqa: BLE001 -- any instrument failure is a frame we cannot see
             return np.nan, np.nan, 0.0, False, f"no frame: {type(err).__name__}: {err}"
         res = self.tracker.update(frame)
-        x, y = float(res.x), float(res.y)
-        ok = bool(res.ok) and math.isfinite(x) and math.isfinite(y)
-        reason = getattr(res, "reason", "") if not res.ok else ("" if ok else "non-finite position")
-        return x, y, float(getattr(res, "score", np.nan)), ok, reason
+        x, y, score, flagged_ok = read_result(res)
+        ok = flagged_ok and math.isfinite(x) and math.isfinite(y)
+        reason = getattr(res, "reason", "") if not flagged_ok else ("" if ok else "non-finite position")
+        return x, y, score, ok, reason
 
     def time(self) -> float:
         return frame_time(self.microscope, self.frames, self.t0)
@@ -316,7 +297,7 @@ def calibrate_positioner(microscope, positioner, roi, *, step_nm=None, tracker=N
                         ("average_frames", average_frames, 1)):
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
             raise ValueError(f"{name} must be an integer >= {lo}, got {v!r}")
-    _roi_centre(roi)
+    start_point(roi)  # a malformed ROI fails here, before anything moves
     eye = _Eye(microscope, tracker, roi)
     p_prev, still = _measure(eye, 0, STILL_FRAMES, "on the still frames")
     noise = float(np.sqrt(np.sum(np.var(still, axis=0, ddof=1))))
@@ -545,14 +526,14 @@ def move_positioner_to(microscope, positioner, roi, target_xy, *, calibration, n
     band = _servo_settings(calibration, gain, deadband_px, max_step_px, n_frames)
     if not np.all(np.isfinite(np.asarray(target_xy, float))):
         raise ValueError(f"target {target_xy!r} is not finite: refusing to drive blind")
-    _roi_centre(roi)
+    start_point(roi)  # a malformed ROI fails here, before anything moves
     if isinstance(warmup_frames, bool) or not isinstance(warmup_frames, (int, np.integer)) or warmup_frames < 0:
         raise ValueError(f"warmup_frames must be a non-negative integer, got {warmup_frames!r}")
     eye = _Eye(microscope, tracker, roi)
     target = _check_target(target_xy, eye.shape)
     first = eye.first
     loop = _ServoLoop(positioner, calibration, target, gain, band, max_step_px)
-    seen = (float(first.x), float(first.y), float(first.score), True, "")
+    seen = (*read_result(first)[:3], True, "")
     for _ in range(int(warmup_frames)):  # the still tip: the tracker's template averages these
         loop.observe(*seen[:2], seen[3])
         seen = eye.look()

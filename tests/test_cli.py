@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import hashlib
 import json
 import shutil
@@ -16,12 +17,14 @@ import pytest
 import tifffile
 
 from semlab.cli import (
+    COMMAND_HELP,
     EXIT_INPUT,
     EXIT_OK,
     EXIT_OUTPUT,
     EXIT_ROI,
     EXIT_TRACKING,
     EXIT_USAGE,
+    build_parser,
     main,
 )
 
@@ -102,6 +105,21 @@ def test_help_documents_commands_and_exit_codes(capsys):
     ):
         assert option in out
     assert "x_nm" in out and "sha-256" in out.lower()
+
+
+def test_help_lists_every_subcommand_on_one_line(capsys, monkeypatch):
+    # every subcommand the parser knows (not a hand-kept list: a new one without a help line fails),
+    # and at least the three whose output columns are contracts
+    monkeypatch.setenv("COLUMNS", "80")  # argparse wraps help to the terminal's width
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    commands = set(sub.choices)
+    assert {"track", "info", "evaluate"} <= commands
+    assert main(["--help"]) == EXIT_OK
+    lines = capsys.readouterr().out.splitlines()
+    for name in commands:
+        listed = [ln for ln in lines if ln.split()[:1] == [name] and ln.startswith("    ")]
+        assert len(listed) == 1, f"semlab --help does not list {name!r}"
+        assert listed[0].split(None, 1)[1] == COMMAND_HELP[name]  # the whole description, unwrapped
 
 
 def test_usage_errors_exit_2(tmp_path, capsys):

@@ -277,3 +277,43 @@ def test_a_frame_that_cannot_be_grabbed_holds(calibrated):
     row = df.iloc[2]
     assert not row["ok"] and row["held"] and "timed out" in row["reason"]
     assert row["dx_nm"] == 0 and row["dy_nm"] == 0
+
+
+class TupleTracker:
+    """semlab's Tracker answering ``(x, y, score, ok)`` tuples, as the VisualTracker protocol allows."""
+
+    def __init__(self):
+        from semlab.tracking import Tracker
+
+        self.inner = Tracker()
+
+    def init(self, frame, roi):
+        r = self.inner.init(frame, roi)
+        return r.x, r.y, r.score, r.ok
+
+    def update(self, frame):
+        r = self.inner.update(frame)
+        return r.x, r.y, r.score, r.ok
+
+
+def test_a_tracker_answering_tuples_calibrates_and_servoes_alike(calibrated):
+    # the same frames (same seed) through the same tracker: the same Jacobian and the same moves, exactly
+    rig = StepperRig(seed=3)
+    cal = calibrate_positioner(rig, rig, roi_at(TIP0), tracker=TupleTracker())
+    assert np.array_equal(cal.jacobian, calibrated.jacobian)
+    runs = []
+    for tracker in (None, TupleTracker()):
+        rig = StepperRig(seed=3)
+        runs.append(move_positioner_to(rig, rig, roi_at(TIP0), TIP0 + (20.0, 5.0), calibration=calibrated,
+                                       n_frames=6, tracker=tracker))
+    assert runs[0][["x", "y", "dx_nm", "dy_nm", "ok"]].equals(runs[1][["x", "y", "dx_nm", "dy_nm", "ok"]])
+
+
+def test_a_malformed_roi_is_refused_before_anything_moves(calibrated):
+    rig = StepperRig()
+    for bad in ((1, 2, 3), (0, 0, -5, 5), (0, np.nan, 5, 5)):
+        with pytest.raises(ValueError, match="roi"):
+            move_positioner_to(rig, rig, bad, TIP0, calibration=calibrated, n_frames=3)
+    with pytest.raises(TypeError, match="init"):
+        calibrate_positioner(rig, rig, roi_at(TIP0), tracker=object())
+    assert rig.moves == []

@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from semlab.sim import Clutter, ProbeGeometry, SEMNoise, SimulatedSEM
-from semlab.sim.scene import probe_bbox, probe_signed_distance
+from semlab.sim.scene import clip_polygon, probe_bbox, probe_signed_distance
 
 
 def _sem(**kw):
@@ -174,3 +174,19 @@ def test_bad_tips_raise():
     # a probe far off the frame is fine: nothing rendered, no crash
     img = sem.render_clean([[-1e4, 5e3]])
     assert np.ptp(img) == pytest.approx(0.0)
+
+
+def _shoelace(pts):
+    return 0.5 * abs(sum(p[0] * q[1] - q[0] * p[1] for p, q in zip(pts, pts[1:] + pts[:1])))
+
+
+def test_clip_polygon_keeps_the_overlap_exactly():
+    # a triangle inside is unchanged; one outside is empty; a square over the rectangle's corner
+    # keeps the overlap, whose area is exact (straight cuts of straight edges: float rounding only)
+    tri = [(1.0, 1.0), (3.0, 1.0), (2.0, 2.0)]
+    assert clip_polygon(tri, 0, 4, 0, 4) == tri
+    assert clip_polygon([(5.0, 5.0), (6.0, 5.0), (6.0, 6.0)], 0, 4, 0, 4) == []
+    square = [(-1.0, -1.0), (2.0, -1.0), (2.0, 2.0), (-1.0, 2.0)]
+    clipped = clip_polygon(square, 0, 4, 0, 4)
+    assert _shoelace(clipped) == pytest.approx(4.0, abs=1e-12)
+    assert all(0 <= x <= 4 and 0 <= y <= 4 for x, y in clipped)

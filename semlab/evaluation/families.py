@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from semlab.roi import clip_window
 from semlab.sim import Clutter, ProbeGeometry, SEMNoise, SimulatedSEM, translation_crb
 from semlab.sim.sequences import Sequence
 from semlab.sim.shapes import AFMTip, BluntProbe, GripperJaws
@@ -157,12 +158,6 @@ def _clutter(d: Draws, **fixed) -> Clutter:
     return Clutter(**kw)
 
 
-def _roi_around(x: float, y: float, width: int, height: int, size: int = ROI_SIZE):
-    rx = min(max(round(x - (size - 1) / 2), 0), width - size)
-    ry = min(max(round(y - (size - 1) / 2), 0), height - size)
-    return (int(rx), int(ry), size, size)
-
-
 def moved_roi(roi, dx: float, dy: float, width: int, height: int):
     """``roi`` moved by the probe's displacement (rounded), kept inside the frame."""
     x, y, w, h = roi
@@ -214,7 +209,7 @@ def _simulate(d: Draws, width: int, height: int, path: np.ndarray, *, noise: SEM
         rows.append((k, sem.last_time, float(tx), float(ty), bool(shown)))
     truth = pd.DataFrame(rows, columns=["frame", "t", "x", "y", "visible"])
     x0, y0 = truth.loc[0, ["x", "y"]]
-    roi = _roi_around(x0, y0, width, height)
+    roi = clip_window(x0, y0, ROI_SIZE, ROI_SIZE, (height, width))  # around the tip, inside the frame
     bounds = []
     for k in crb_sample_frames(n):
         if not truth.loc[k, "visible"]:

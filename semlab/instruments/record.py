@@ -10,11 +10,12 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import sys
 from datetime import UTC, datetime
 from pathlib import Path
 
 import pandas as pd
+
+from semlab.environment import describe as describe_environment
 
 __all__ = ["save_run"]
 
@@ -25,18 +26,6 @@ def _describe(obj) -> dict:
     if callable(describe):
         return describe()
     return {"class": f"{type(obj).__module__}.{type(obj).__qualname__}"}
-
-
-def _versions() -> dict:
-    """``semlab track``'s environment record, plus semlab's and fibsem's versions."""
-    from semlab.cli import _environment
-
-    env = _environment()
-    for name in ("semlab", "fibsem"):
-        mod = sys.modules.get(name)
-        if mod is not None:
-            env[name] = getattr(mod, "__version__", "?")
-    return env
 
 
 def save_run(table: pd.DataFrame, out, *, microscope=None, positioner=None, calibration=None, roi=None,
@@ -78,7 +67,7 @@ def save_run(table: pd.DataFrame, out, *, microscope=None, positioner=None, cali
         "conventions": "x, y: the ROI centre point, frame px (pixel centres at integer coordinates, x "
                        "right, y down); dx_nm, dy_nm: the relative move sent after the frame, in the "
                        "positioner's own axes",
-        "environment": _versions(),
+        "environment": describe_environment(extra=("semlab", "fibsem")),
         **extra,
     }
     sidecar = out.with_name(out.name + ".json")

@@ -24,7 +24,9 @@ __all__ = [
     "DEFAULT_PROBE_ANGLES_DEG",
     "Clutter",
     "ProbeGeometry",
+    "clip_polygon",
     "make_substrate",
+    "polygons_bbox",
     "probe_bbox",
     "probe_signed_distance",
     "render_disc",
@@ -189,8 +191,22 @@ def probe_signed_distance(X, Y, tip_xy, angle_rad, tip_radius_px, half_angle_rad
     return d, v_signed / half_width
 
 
-def _clip_polygon(points, xmin, xmax, ymin, ymax):
-    """Sutherland-Hodgman clipping of a convex polygon to an axis-aligned rectangle."""
+def clip_polygon(points, xmin, xmax, ymin, ymax) -> list[tuple[float, float]]:
+    """Sutherland-Hodgman clipping of a convex polygon to an axis-aligned rectangle.
+
+    Parameters
+    ----------
+    points : sequence of (x, y)
+        The convex polygon's vertices, in order (either orientation).
+    xmin, xmax, ymin, ymax : float
+        The rectangle (closed: a vertex on its boundary is inside).
+
+    Returns
+    -------
+    list of (x, y)
+        The clipped polygon's vertices, in the input's orientation; ``[]`` when the polygon and the
+        rectangle do not overlap.
+    """
     def clip(pts, inside, cross):
         out = []
         for i, p in enumerate(pts):
@@ -238,15 +254,25 @@ def probe_bbox(tip_xy, angle_rad, tip_radius_px, half_angle_rad, margin_px, widt
     half = far * math.tan(half_angle_rad)
     bx, by = cx - far * c, cy - far * s
     tri = [(cx, cy), (bx - half * s, by + half * c), (bx + half * s, by - half * c)]
-    poly = _clip_polygon(tri, -R, width - 1 + R, -R, height - 1 + R)
-    if not poly:
+    return polygons_bbox([tri], R, width, height)
+
+
+def polygons_bbox(polygons, margin_px, width, height):
+    """Bounding box ``(x0, x1, y0, y1)`` (half-open, clipped) of convex polygons dilated by a margin.
+
+    Each polygon is clipped (:func:`clip_polygon`) to the frame grown by ``margin_px``, so a body
+    reaching far beyond the frame counts only where it can touch it; the clipped polygons' box grows by
+    ``margin_px`` and is clipped to the ``width`` x ``height`` frame. ``None`` when nothing reaches in.
+    """
+    m = margin_px
+    pts = [q for P in polygons for q in clip_polygon(P, -m, width - 1 + m, -m, height - 1 + m)]
+    if not pts:
         return None
-    xs = [p[0] for p in poly]
-    ys = [p[1] for p in poly]
-    x0 = max(math.floor(min(xs) - R), 0)
-    x1 = min(math.ceil(max(xs) + R) + 1, width)
-    y0 = max(math.floor(min(ys) - R), 0)
-    y1 = min(math.ceil(max(ys) + R) + 1, height)
+    xs, ys = zip(*pts)
+    x0 = max(math.floor(min(xs) - m), 0)
+    x1 = min(math.ceil(max(xs) + m) + 1, width)
+    y0 = max(math.floor(min(ys) - m), 0)
+    y1 = min(math.ceil(max(ys) + m) + 1, height)
     if x0 >= x1 or y0 >= y1:
         return None
     return x0, x1, y0, y1

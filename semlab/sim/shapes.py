@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .scene import _clip_polygon, _edge_terms, _grid
+from .scene import _edge_terms, _grid, polygons_bbox
 
 __all__ = ["AFMTip", "BluntProbe", "GripperJaws", "ProbeShape", "polygon_signed_distance",
            "render_shape", "shape_signed_distance"]
@@ -256,21 +256,12 @@ def render_shape(buf, shape: ProbeShape, tip_xy, angle_rad, pixel_size_nm, sigma
     margin = 5.0 * sigma_px + 3.0 * rim_w_px + 2.0 + shape.corner_radius_px(pixel_size_nm)
     if row_shift is not None and len(row_shift):
         margin += float(np.max(np.abs(row_shift)))
-    boxes = []
-    for P in shape.polygons_px(pixel_size_nm, far_px):
-        clipped = _clip_polygon([tuple(q) for q in _to_image(P, (tx, ty), angle_rad)],
-                                -margin, w - 1 + margin, -margin, h - 1 + margin)
-        if clipped:
-            xs, ys = zip(*clipped)
-            boxes.append((min(xs), max(xs), min(ys), max(ys)))
-    if not boxes:
+    polygons = [[tuple(q) for q in _to_image(P, (tx, ty), angle_rad)]
+                for P in shape.polygons_px(pixel_size_nm, far_px)]
+    box = polygons_bbox(polygons, margin, w, h)
+    if box is None:
         return None
-    x0 = max(math.floor(min(b[0] for b in boxes) - margin), 0)
-    x1 = min(math.ceil(max(b[1] for b in boxes) + margin) + 1, w)
-    y0 = max(math.floor(min(b[2] for b in boxes) - margin), 0)
-    y1 = min(math.ceil(max(b[3] for b in boxes) + margin) + 1, h)
-    if x0 >= x1 or y0 >= y1:
-        return None
+    x0, x1, y0, y1 = box
     X, Y = _grid(x0, x1, y0, y1, row_shift, np.float64)
     d, across = shape_signed_distance(X, Y, shape, (tx, ty), angle_rad, pixel_size_nm, far_px)
     d = d.astype(buf.dtype)
