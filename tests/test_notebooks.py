@@ -51,7 +51,7 @@ def test_notebook_is_stripped(path):
 
 
 # Notebooks whose conclusion their owners are still writing (issue 15 asks it of every notebook).
-PENDING_CONCLUSION = {"05_servo_step.ipynb", "08_evaluation.ipynb"}
+PENDING_CONCLUSION = {"05_servo_step.ipynb"}
 
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.name)
@@ -338,6 +338,61 @@ def _claims_07(r):
     assert r["fei_contour_right_edge_px"] < r["fei_post_left_edge_px"]
 
 
+def _claims_08(r):
+    full = r["seeds"] == [0, 1]        # fast mode: test seed 0 alone (the bracketed figures)
+    assert r["seeds"] in ([0], [0, 1]) and r["n_families"] == 11
+    sem, peer, silent = r["semlab_rmse_over_crb"], r["best_peer_rmse_over_crb"], r["semlab_silent"]
+    ahead = ["moves_200px", "wander", "jumps", "gray_charging", "clutter", "shapes", "substrates"]
+    # "On 7 of the 11 families (...) semlab's median RMSE is below every peer's: 2.3-13x the bound (1.3-4.0x) where
+    # the best peer is 17-1,400x (2.8-960x)"
+    assert r["semlab_ahead"] == ahead and r["semlab_behind"] == ["still", "low_dose", "thin_low_dose", "semi_real"]
+    lo, hi = (2.25, 13.0) if full else (1.25, 4.05)
+    assert lo <= min(sem[f] for f in ahead) and max(sem[f] for f in ahead) <= hi
+    lo, hi = (16.5, 1400.0) if full else (2.7, 965.0)
+    assert lo <= min(peer[f] for f in ahead) and max(peer[f] for f in ahead) <= hi
+    # "in the full run the best peer is silent on 23-67 % of its frames there"
+    if full:
+        assert 0.225 <= min(r["best_peer_silent"][f] for f in ahead) <= max(r["best_peer_silent"][f] for f in ahead) <= 0.675
+    # "semlab is within issue 14's 2x the bound on none of these families in the full run (shapes and substrates on
+    # seed 0)"
+    assert [f for f in ahead if sem[f] <= 2.0] == ([] if full else ["shapes", "substrates"])
+    # "TM_SQDIFF is at 1.06x the bound (1.18x) against semlab's 1.79x (1.70x)"
+    assert r["best_peer"]["still"] == "sqdiff" and round(peer["still"], 2) == (1.06 if full else 1.18)
+    assert round(sem["still"], 2) == (1.79 if full else 1.70)
+    # "semlab flags every frame of the low-dose family (100 % flagged, none silent) and so gives no position, where
+    # the best peer tracks at 17x the bound (ECC at 4.7x) while silent on 46-72 % of its frames"
+    assert r["semlab_flagged"]["low_dose"] == 1.0 and silent["low_dose"] == 0 and sem["low_dose"] == math.inf
+    if full:
+        assert round(peer["low_dose"]) == 17
+    else:
+        assert (r["best_peer"]["low_dose"], round(peer["low_dose"], 1)) == ("ecc", 4.7)
+    assert 0.455 <= r["best_peer_silent"]["low_dose"] <= 0.725
+    # "On the thin needle at low dose it flags 82 % of the frames (64 %) and is silent on 18 % (36 %); on the
+    # semi-real needle it flags none and is silent on 46 % (92 %), at 27x the bound (48x) where the best peer is at
+    # 24x (39x)"
+    assert round(r["semlab_flagged"]["thin_low_dose"], 2) == (0.82 if full else 0.64)
+    assert round(silent["thin_low_dose"], 2) == (0.18 if full else 0.36)
+    assert r["semlab_flagged"]["semi_real"] == 0 and round(silent["semi_real"], 2) == (0.46 if full else 0.92)
+    assert round(sem["semi_real"]) == (27 if full else 48) and round(peer["semi_real"]) == (24 if full else 39)
+    # "semlab reports no frame more than 1 px off as ok on the still probe, wander, low dose, gray-level charging and
+    # shapes in both runs; issue 14's <= 0.5 % holds on 5 of the 11 families (7 on seed 0). It does not on the 200-px
+    # moves and the jumps (1-8 %), on clutter and substrates in the full run (39 % and 5 %, from seed 1), ..."
+    assert all(silent[f] == 0 for f in ("still", "wander", "low_dose", "gray_charging", "shapes"))
+    assert sum(v <= 0.005 for v in silent.values()) == (5 if full else 7)
+    assert all(0.01 <= silent[f] <= 0.08 for f in ("moves_200px", "jumps"))
+    if full:
+        assert (round(silent["clutter"], 2), round(silent["substrates"], 2)) == (0.39, 0.05)
+    # "coverage95 ... is 0.86-1 wherever semlab is silent on at most 8 % of its frames, and 0.55 or less where it is
+    # silent on more (the thin needle, the semi-real needle, and clutter in the full run)"
+    cov = r["coverage95"]
+    assert min(v for f, v in cov.items() if silent[f] <= 0.08) >= 0.86
+    high = [f for f in cov if silent[f] > 0.08]
+    assert sorted(high) == sorted(["thin_low_dose", "semi_real"] + (["clutter"] if full else []))
+    assert max(cov[f] for f in high) <= 0.55
+    # "No run was cut short by a tracker error."
+    assert r["n_errors"] == 0
+
+
 def _claims_09(r):
     assert r["demo"]          # the claims are the Demo's: the simulator knows the truth
     # "every entry of the measured Jacobian lies within 1.5 % of the simulator's view times its move error, at most
@@ -353,15 +408,19 @@ def _claims_09(r):
     # "After 4 still frames, a 47 px move comes within 0.5 px of the target at frame 3, tracked and true alike"
     assert r["warmup_frames"] == 4 and round(r["start_error_px"]) == 47
     assert r["first_within_0_5_px_tracked"] == 3 == r["first_within_0_5_px_true"]
-    # "the dead band (0.25 px ...) keeps the needle still ...: no move is sent after landing, and the true distance
-    # to the target stays under 0.3 px"
-    assert round(r["deadband_px"], 2) == 0.25 and r["moves_sent_after_landing"] == 0
-    assert r["true_error_after_landing_max_px"] < 0.3 and r["final_true_error_px"] < 0.3
+    # "the dead band (0.25 px ...) keeps the needle still ... and corrects only when that average leaves it: in fast
+    # mode's 15 frames no move is sent after landing; in a full run's 30 frames two corrections of about 10 nm follow
+    # the tip's slow drift in the image (0.30 px off by frame 17) and bring it back to 0.07 px. After landing the true
+    # distance to the target stays under 0.3 px."
+    full = r["n_frames"] == 30
+    assert round(r["deadband_px"], 2) == 0.25 and r["moves_sent_after_landing"] == (2 if full else 0)
+    assert r["true_error_after_landing_max_px"] < 0.3
+    if full:
+        assert 5.0 <= r["largest_move_after_landing_nm"] <= 15.0 and round(r["final_true_error_px"], 2) == 0.07
     # "No frame of this run was flagged, so none was held"
     assert r["frames_flagged"] == 0 == r["frames_held"]
     # "the sidecar's SHA-256 is that of the CSV beside it, whose rows are the run's (15 in fast mode, 30 in a full run)"
     assert r["sidecar_sha256_matches_csv"] and r["sidecar_rows"] == r["n_frames"] in (15, 30)
-
 
 CLAIMS = {
     "00_simulated_rig.ipynb": _claims_00,
@@ -371,5 +430,6 @@ CLAIMS = {
     "04_hysteresis.ipynb": _claims_04,
     "06_robustness.ipynb": _claims_06,
     "07_real_sem.ipynb": _claims_07,
+    "08_evaluation.ipynb": _claims_08,
     "09_real_instrument.ipynb": _claims_09,
 }
