@@ -169,6 +169,10 @@ def summarise_errors(errors: pd.DataFrame, crb=None, *, loss_px: float = LOSS_PX
     return out
 
 
+#: run_tracker's columns: track()'s, and why a frame is flagged (notebooks 02 and 06 count "too uncertain").
+_RUN_COLUMNS = ["frame", "x", "y", "score", "ok", "reason", "sigma_x", "sigma_y"]
+
+
 def run_tracker(tracker, frames, roi) -> tuple[pd.DataFrame, float]:
     """Run any ``init/update`` tracker over ``frames``; return its track and ms per ``update``.
 
@@ -183,7 +187,9 @@ def run_tracker(tracker, frames, roi) -> tuple[pd.DataFrame, float]:
     Returns
     -------
     (pandas.DataFrame, float)
-        ``frame, x, y, score, ok`` per frame, and the mean wall time of ``update`` in ms. When the
+        ``frame, x, y, score, ok, reason, sigma_x, sigma_y`` per frame (``reason``: why ``ok`` is
+        False, e.g. "too uncertain ..."; ``sigma_x, sigma_y``: the tracker's own 1-σ uncertainty, NaN
+        for a tracker that reports none), and the mean wall time of ``update`` in ms. When the
         tracker refuses to start (``init`` raises ``ValueError``, e.g. no object above the noise in
         the ROI), every row is ``ok=False`` with NaN position, the reason is kept in
         ``df.attrs["init_error"]`` and the time is NaN: in a sweep a refusal counts as a loss.
@@ -194,11 +200,12 @@ def run_tracker(tracker, frames, roi) -> tuple[pd.DataFrame, float]:
         rows = start_trackers([tracker], frames[0], [roi])
     except ValueError as err:
         nan = float("nan")
-        df = pd.DataFrame([(i, nan, nan, 0.0, False) for i in range(len(frames))],
-                          columns=["frame", "x", "y", "score", "ok"])
+        df = pd.DataFrame([(i, nan, nan, 0.0, False, f"refused: {err}", nan, nan) for i in range(len(frames))],
+                          columns=_RUN_COLUMNS)
         df.attrs["init_error"] = str(err)
         return df, nan
     t0 = time.perf_counter()
     rows += follow_frames([tracker], (frames[i] for i in range(1, len(frames))))
     ms = (time.perf_counter() - t0) * 1e3 / max(len(frames) - 1, 1)
-    return pd.DataFrame([(i, r.x, r.y, r.score, r.ok) for i, _, r in rows], columns=["frame", "x", "y", "score", "ok"]), ms
+    return pd.DataFrame([(i, r.x, r.y, r.score, r.ok, getattr(r, "reason", ""), getattr(r, "sigma_x", math.nan),
+                          getattr(r, "sigma_y", math.nan)) for i, _, r in rows], columns=_RUN_COLUMNS), ms
