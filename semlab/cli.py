@@ -37,6 +37,8 @@ EXIT_INPUT = 3
 EXIT_ROI = 4
 EXIT_TRACKING = 5
 EXIT_OUTPUT = 6
+#: ``semlab evaluate``: the dask scheduler could not be reached.
+EXIT_SCHEDULER = 7
 EXIT_INTERRUPTED = 130
 
 EXIT_CODES = f"""\
@@ -51,6 +53,7 @@ exit codes:
   {EXIT_TRACKING}    tracking failure: the tracker cannot start from the first frame and ROI
        (e.g. a featureless ROI, no contour in it)
   {EXIT_OUTPUT}    output error: the output file or its sidecar cannot be written
+  {EXIT_SCHEDULER}    scheduler error (semlab evaluate): the dask scheduler cannot be reached
   {EXIT_INTERRUPTED}  interrupted (Ctrl-C)
 Errors are one line on stderr: 'semlab: error: <file>: <reason>'. Output files are written under a
 temporary name and renamed only when complete, so a failed run leaves no partial output.
@@ -701,9 +704,6 @@ def _print_track_summary(args, seq, res, roi, record, out, sidecar) -> None:
 
 # ----------------------------------------------------------------------------------------------
 # semlab evaluate: the scene-family corpus (issue 13)
-
-#: ``semlab evaluate``: the dask scheduler could not be reached.
-EXIT_SCHEDULER = 7
 
 EVALUATE_DESCRIPTION = """\
 Run trackers on the scene-family corpus (semlab.evaluation) and write one CSV row per family x seed
