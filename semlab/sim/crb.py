@@ -176,7 +176,7 @@ def translation_fisher(sem, tips, roi, probe=0, *, t=None, h=1e-2, nuisance="aut
     (p, p) ndarray
         Fisher matrix; the first two parameters are the translation in px.
     """
-    tips = sem._check_tips(tips)
+    tips = sem.check_tips(tips)
     if isinstance(probe, bool) or not isinstance(probe, (int, np.integer)) or not 0 <= probe < len(tips):
         raise ValueError(f"probe {probe!r} is not one of the {len(tips)} tips")
     check_roi(roi, sem.width, sem.height)

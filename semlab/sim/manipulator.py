@@ -90,7 +90,8 @@ class MacroStepper:
         self._pending = min(max(q, lo), hi)
         return self._pending
 
-    def _latch(self) -> None:
+    def latch(self) -> None:
+        """The pending move takes effect (the rig calls this at the start of each frame)."""
         if self._pending is not None:
             self._position = self._pending
             self._pending = None
@@ -146,7 +147,9 @@ class NanoAxis:
         """The last commanded voltage after DAC quantisation (what the DAC will output)."""
         return self._pending if self._pending is not None else self._applied
 
-    def _latch(self, t: float) -> None:
+    def latch(self, t: float) -> None:
+        """The DAC outputs the pending command from time ``t`` (the rig calls this at the start of
+        each frame: a command applied during a frame acts from the next one)."""
         if self._pending is not None:
             self._applied = self._pending
             self._pending = None
@@ -179,10 +182,11 @@ class Manipulator:
                                     **(nano_options or {}))
             self.macro[a] = MacroStepper(f"manipulator {index} {a} macro", a)
 
-    def _latch(self, t: float) -> None:
+    def latch(self, t: float) -> None:
+        """Every axis takes its pending command from time ``t``."""
         for a in AXES:
-            self.nano[a]._latch(t)
-            self.macro[a]._latch()
+            self.nano[a].latch(t)
+            self.macro[a].latch()
 
     def displacement_nm(self, t: float) -> dict:
         """Total displacement from home per axis (macro offset + piezo), nm."""

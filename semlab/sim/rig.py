@@ -230,7 +230,7 @@ class SimulatedRig:
         k = sem.frame_index
         t_start = k * sem.frame_period
         for man in self._manipulators:
-            man._latch(t_start)
+            man.latch(t_start)
         t_mid = sem.time
         tips = self._tips_nominal(t_mid)
         frame = sem.acquire(tips)

@@ -25,12 +25,14 @@ __all__ = [
     "Clutter",
     "ProbeGeometry",
     "clip_polygon",
+    "edge_terms",
     "make_substrate",
     "polygons_bbox",
     "probe_bbox",
     "probe_signed_distance",
     "render_disc",
     "render_probe",
+    "sample_grid",
 ]
 
 #: Direction in which each manipulator's probe points (degrees, image frame: 0 = +x,
@@ -278,8 +280,9 @@ def polygons_bbox(polygons, margin_px, width, height):
     return x0, x1, y0, y1
 
 
-def _edge_terms(d, sigma, level, rim_amp, rim_w):
-    """Blurred coverage and rim for a signed distance map (see module docstring)."""
+def edge_terms(d, sigma, level, rim_amp, rim_w):
+    """Blurred coverage and rim for a signed distance map (see module docstring); shared by every
+    rendered outline (the probe here, other shapes in :mod:`semlab.sim.shapes`)."""
     if sigma > 0:
         # erfc is costly: evaluate it only in the band where it differs from 0/1 by
         # more than ~1e-12 (|d| < 7 sigma); the band boundary is a fixed distance from
@@ -300,7 +303,9 @@ def _edge_terms(d, sigma, level, rim_amp, rim_w):
     return cov, rim
 
 
-def _grid(x0, x1, y0, y1, row_shift, dtype):
+def sample_grid(x0, x1, y0, y1, row_shift, dtype):
+    """The pixel centres ``(xs, ys)`` of the box ``[x0, x1) × [y0, y1)`` (broadcastable), each
+    scan line shifted by ``row_shift[y]`` (the scan's line jitter) when given."""
     xs = np.arange(x0, x1, dtype=dtype)[None, :]
     ys = np.arange(y0, y1, dtype=dtype)[:, None]
     if row_shift is not None:
@@ -343,14 +348,14 @@ def render_probe(buf, tip_xy, angle_rad, tip_radius_px, half_angle_rad, sigma_px
     if bbox is None:
         return None
     x0, x1, y0, y1 = bbox
-    X, Y = _grid(x0, x1, y0, y1, row_shift, buf.dtype)
+    X, Y = sample_grid(x0, x1, y0, y1, row_shift, buf.dtype)
     if shading > 0:
         d, across = probe_signed_distance(X, Y, tip_xy, angle_rad, tip_radius_px,
                                           half_angle_rad, return_across=True)
         level = level * (1.0 + shading * across.astype(buf.dtype))
     else:
         d = probe_signed_distance(X, Y, tip_xy, angle_rad, tip_radius_px, half_angle_rad)
-    cov, rim = _edge_terms(d, sigma_px, 0.0, rim_amp, rim_w_px)
+    cov, rim = edge_terms(d, sigma_px, 0.0, rim_amp, rim_w_px)
     sub = buf[y0:y1, x0:x1]
     sub += cov * (level - sub)
     if rim is not None:
@@ -370,9 +375,9 @@ def render_disc(buf, centre_xy, radius_px, sigma_px, level, rim_amp=0.0, rim_w_p
     y0, y1 = max(math.floor(cy - m), 0), min(math.ceil(cy + m) + 1, h)
     if x0 >= x1 or y0 >= y1:
         return None
-    X, Y = _grid(x0, x1, y0, y1, row_shift, buf.dtype)
+    X, Y = sample_grid(x0, x1, y0, y1, row_shift, buf.dtype)
     d = np.sqrt((X - cx) ** 2 + (Y - cy) ** 2) - radius_px
-    cov, rim = _edge_terms(d, sigma_px, level, rim_amp, rim_w_px)
+    cov, rim = edge_terms(d, sigma_px, level, rim_amp, rim_w_px)
     sub = buf[y0:y1, x0:x1]
     sub += cov * (level - sub)
     if rim is not None:

@@ -159,7 +159,8 @@ class SimulatedSEM:
         v = self.noise.drift_px_per_s
         return np.array([v * t * math.cos(self._drift_angle), v * t * math.sin(self._drift_angle)])
 
-    def _check_tips(self, tips) -> np.ndarray:
+    def check_tips(self, tips) -> np.ndarray:
+        """``tips`` as an ``(n, 2)`` float array of finite positions (px), or a ValueError."""
         arr = np.asarray(tips, dtype=float)
         if arr.ndim == 1 and arr.size == 2:
             arr = arr[None, :]
@@ -259,7 +260,7 @@ class SimulatedSEM:
             ``brightness + contrast * yield`` (:attr:`contrast`): no noise, drift, jitter,
             gain/offset fluctuation or quantisation.
         """
-        tips = self._check_tips(tips)
+        tips = self.check_tips(tips)
         t = self.time if t is None else float(t)
         if not (np.isfinite(charge) and charge > 0):
             raise ValueError(f"charge must be a positive factor, got {charge!r}")
@@ -279,7 +280,7 @@ class SimulatedSEM:
         -------
         (H, W) ndarray of :attr:`dtype`
         """
-        tips = self._check_tips(tips)
+        tips = self.check_tips(tips)
         nz = self.noise
         rng = self._rng
         t = self.time

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .scene import _edge_terms, _grid, polygons_bbox
+from .scene import edge_terms, polygons_bbox, sample_grid
 
 __all__ = ["AFMTip", "BluntProbe", "GripperJaws", "ProbeShape", "polygon_signed_distance",
            "render_shape", "shape_signed_distance"]
@@ -262,12 +262,12 @@ def render_shape(buf, shape: ProbeShape, tip_xy, angle_rad, pixel_size_nm, sigma
     if box is None:
         return None
     x0, x1, y0, y1 = box
-    X, Y = _grid(x0, x1, y0, y1, row_shift, np.float64)
+    X, Y = sample_grid(x0, x1, y0, y1, row_shift, np.float64)
     d, across = shape_signed_distance(X, Y, shape, (tx, ty), angle_rad, pixel_size_nm, far_px)
     d = d.astype(buf.dtype)
     if shading > 0:
         level = level * (1.0 + shading * np.clip(across, -1.0, 1.0).astype(buf.dtype))
-    cov, rim = _edge_terms(d, sigma_px, 0.0, rim_amp, rim_w_px)
+    cov, rim = edge_terms(d, sigma_px, 0.0, rim_amp, rim_w_px)
     sub = buf[y0:y1, x0:x1]
     sub += cov * (level - sub)
     if rim is not None:
