@@ -1,0 +1,235 @@
+"""The control law of one axis (AxisLoop, paper Fig. 8a) in a world where the model is exact: a linear
+axis y = G (u - U0) / (Un - U0) px, no hysteresis, no noise, the command acting from the next frame.
+
+There the loop's output is known in closed form from its documented law -- the feed-forward stops
+short by ``ff_margin`` of the move, then ``y[k+1] = goal + c[k]`` (feed-forward) or ``y[k+1] = c[k]``
+(PID only) with ``c`` a :class:`PID` on the measurement -- so the displacements must match that
+recursion to rounding (1e-9 px on moves of ~20 px: a few model inversions, each exact to 1e-12 of the
+range). The PID itself is checked against python-control in ``test_pid_oracle.py``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from semlab.control import PID, REACH_SLOPE_FACTOR, REACH_TOLERANCE, AxisLoop
+from semlab.hysteresis import PolynomialHysteresis
+
+G = 400.0  # px over the characterised range
+RANGE = (0.0, 100.0)
+GAIN = G / (RANGE[1] - RANGE[0])  # px/V
+ATOL = 1e-9
+
+
+class LinearAxis:
+    """An axis with limits that reports the command it holds (optionally quantised, like a DAC)."""
+
+    name = "lin 0 x"
+
+    def __init__(self, u, limits=RANGE, step_v=None):
+        self.limits, self.step_v, self.u = limits, step_v, float(u)
+        self.sent = []
+
+    def apply(self, volts):
+        assert self.limits[0] <= volts <= self.limits[1]
+        self.sent.append(float(volts))
+        self.u = float(volts) if self.step_v is None else round(volts / self.step_v) * self.step_v
+
+    @property
+    def command(self):
+        return self.u
+
+
+def exact_model(u_start):
+    m = PolynomialHysteresis([0.0, G], [0.0, G], RANGE, axis="lin 0 x")
+    m.reset(u_start)
+    return m
+
+
+def run(loop, axis, target, n, u_start, *, measure=None):
+    """Drive ``loop`` for ``n`` frames; the measurement of frame k+1 is the truth of the command of frame
+    k, from the start position. Returns the measured displacements of frames 0..n."""
+    truth = measure or (lambda u: GAIN * (u - u_start))
+    ys = [truth(axis.u)]
+    loop.begin(target, ys[0], 0)
+    for k in range(n):
+        loop.act(ys[-1], k)
+        ys.append(truth(axis.u))
+    return np.array(ys)
+
+
+@pytest.mark.parametrize("kp, ki, margin", [(0.0, 0.8, 0.025), (0.3, 0.5, 0.1), (0.6, 0.2, 0.0)])
+def test_feedforward_then_pid_on_the_goal_follows_its_law(kp, ki, margin):
+    u0, step = 30.0, 20.0
+    axis = LinearAxis(u0)
+    loop = AxisLoop(axis, exact_model(u0), frame_period=0.1, pid=PID(kp=kp, ki=ki), ff_margin=margin)
+    ys = run(loop, axis, step, 30, u0)
+    # oracle: the feed-forward lands short by margin * step; then y[k+1] = step + c[k] (measurement frame)
+    pid = PID(kp=kp, ki=ki)
+    pid.reset(-margin * step)
+    pid.set_limits(GAIN * RANGE[0] - G * u0 / 100 - step, GAIN * RANGE[1] - G * u0 / 100 - step)
+    expected = [0.0, step * (1 - margin)]
+    for _ in range(29):
+        c = pid.update(step, expected[-1])
+        pid.track(c)
+        expected.append(step + c)
+    np.testing.assert_allclose(ys, expected, atol=ATOL)
+    assert abs(ys[-1] - step) < 1e-3 * step  # integral action: no steady-state error
+    assert loop.pid.output_limits == pytest.approx(pid.output_limits)
+
+
+def test_pid_only_moves_the_command_by_the_pid_output_over_the_gain():
+    u0, step = 60.0, -15.0
+    axis = LinearAxis(u0)
+    loop = AxisLoop(axis, exact_model(u0), frame_period=0.1, feedforward=False, pid=PID(kp=0.2, ki=0.4))
+    ys = run(loop, axis, step, 25, u0)
+    pid = PID(kp=0.2, ki=0.4)  # reset(0): no feed-forward, nothing to stop short of
+    pid.set_limits((RANGE[0] - u0) * GAIN, (RANGE[1] - u0) * GAIN)
+    expected = [0.0]
+    for _ in range(25):
+        c = pid.update(step, expected[-1])
+        pid.track(c)
+        expected.append(c)  # y[k+1] = G (u_ref + c/G - u_ref)
+    np.testing.assert_allclose(ys, expected, atol=ATOL)
+    np.testing.assert_allclose(axis.sent, u0 + np.array(expected[1:]) / GAIN, atol=ATOL)
+    assert loop.pid.output_limits == pytest.approx(pid.output_limits)
+
+
+def test_default_gains_with_and_without_feedforward():
+    assert AxisLoop(LinearAxis(50.0), exact_model(50.0), frame_period=0.1).pid.ki == 0.8
+    assert AxisLoop(LinearAxis(50.0), exact_model(50.0), frame_period=0.1, feedforward=False).pid.ki == 0.45
+
+
+def test_reach_is_the_model_at_the_limits_and_the_generous_reach_its_documented_allowance():
+    u0 = 30.0
+    model = exact_model(u0)
+    loop = AxisLoop(LinearAxis(u0, limits=(-10.0, 110.0)), model, frame_period=0.1)
+    y_model = model.state.y
+    s_lo, s_hi = model.extrapolation_slopes
+    lo_m, hi_m = model.displacement(-10.0), model.displacement(110.0)
+    y_meas = 5.0  # any measurement frame: the reach is relative to it
+    assert loop.reach(y_meas) == pytest.approx((y_meas + lo_m - y_model, y_meas + hi_m - y_model), abs=ATOL)
+    # generous: (1 + tolerance) times the predicted distance, plus (factor - 1) times the slope of the
+    # extrapolation beyond the characterised range (10 V each side here)
+    g_hi = y_meas + (1 + REACH_TOLERANCE) * (hi_m - y_model) + (REACH_SLOPE_FACTOR - 1) * s_hi * 10.0
+    g_lo = y_meas + (1 + REACH_TOLERANCE) * (lo_m - y_model) - (REACH_SLOPE_FACTOR - 1) * s_lo * 10.0
+    assert loop.reach(y_meas, generous=True) == pytest.approx((g_lo, g_hi), abs=ATOL)
+    loop.check_reach(g_hi - 1e-6, y_meas)
+    loop.check_reach(g_lo + 1e-6, y_meas)
+    with pytest.raises(ValueError, match=r"outside what 'lin 0 x' can reach.*steeper than its extrapolation"):
+        loop.check_reach(g_hi + 1e-6, y_meas)
+    with pytest.raises(ValueError, match="outside what"):
+        loop.check_reach(g_lo - 1e-6, y_meas)
+
+
+def test_reach_within_the_characterised_range_allows_the_tolerance_only():
+    u0 = 90.0  # 10 V = 40 px below the upper limit, which is the end of the characterised range
+    loop = AxisLoop(LinearAxis(u0), exact_model(u0), frame_period=0.1)
+    assert loop.reach(0.0, generous=True)[1] == pytest.approx(40.0 * (1 + REACH_TOLERANCE), abs=ATOL)
+    with pytest.raises(ValueError, match=r"outside what .* allowing the model 10% error$"):
+        loop.check_reach(44.01, 0.0)
+
+
+def test_a_target_beyond_the_limit_holds_the_axis_exactly_at_it_and_flags_it():
+    u0 = 90.0
+    axis = LinearAxis(u0)
+    loop = AxisLoop(axis, exact_model(u0), frame_period=0.1)
+    ys = run(loop, axis, 43.0, 10, u0)  # within the generous reach (44 px), beyond the real one (40 px)
+    assert axis.sent[-1] == RANGE[1] and loop.at_limit
+    assert ys[-1] == pytest.approx(40.0, abs=ATOL)
+    assert max(axis.sent) == RANGE[1]
+    # the correction never winds up past what the limit allows: the next move leaves the limit at once
+    loop.end()
+    ys2 = run(loop, axis, ys[-1] - 10.0, 1, u0)
+    assert ys2[-1] == pytest.approx(ys[-1] - 10.0 * (1 - loop.ff_margin), abs=ATOL)
+    assert not loop.at_limit
+
+
+def test_slew_limit_bounds_every_command_change():
+    u0, step, slew = 30.0, 20.0, 2.0  # 19.5 px of feed-forward = 4.875 V: three slewed commands
+    axis = LinearAxis(u0)
+    loop = AxisLoop(axis, exact_model(u0), frame_period=0.1, max_slew_v=slew)
+    ys = run(loop, axis, step, 40, u0)
+    du = np.diff([u0] + axis.sent)
+    assert np.all(np.abs(du) <= slew + 1e-12)
+    np.testing.assert_allclose(du[:2], [slew, slew], atol=ATOL)
+    assert ys[1] == pytest.approx(GAIN * slew, abs=ATOL)
+    assert abs(ys[-1] - step) < 1e-3 * step
+
+
+def test_feedforward_in_steps_of_max_step_px_ignores_the_measurement_meanwhile():
+    u0, step = 30.0, 20.0  # feed-forward 19.5 px in steps of 6: 6, 12, 18, 19.5
+    axis = LinearAxis(u0)
+    loop = AxisLoop(axis, exact_model(u0), frame_period=0.1, max_step_px=6.0)
+    loop.begin(step, 0.0, 0)
+    for k in range(4):
+        loop.act(math.nan if k else 0.0, k)  # not read while the feed-forward move is under way
+    np.testing.assert_allclose(GAIN * (np.array(axis.sent) - u0), [6.0, 12.0, 18.0, 19.5], atol=ATOL)
+    with pytest.raises(ValueError, match="not finite"):  # then it is: the PID refuses to drive blind
+        loop.act(math.nan, 4)
+
+
+def test_fine_gain_after_two_frames_in_the_band_and_coarse_again_at_the_end():
+    u0 = 30.0
+    axis = LinearAxis(u0)
+    loop = AxisLoop(axis, exact_model(u0), frame_period=0.1, pid=PID(ki=0.8), ki_fine=0.1, fine_band_px=0.5)
+    loop.begin(20.0, 0.0, 0)
+    loop.act(0.0, 0)  # the feed-forward
+    for y, ki in ((19.0, 0.8), (19.6, 0.8), (19.7, 0.1), (18.0, 0.1)):  # 0.4 and 0.3 px off: in the band
+        loop.act(y, 1)
+        assert loop.pid.ki == ki
+    loop.end()
+    assert loop.pid.ki == 0.8
+
+
+def test_the_dac_s_command_is_what_the_model_remembers():
+    u0 = 30.0
+    axis = LinearAxis(u0, step_v=0.01)  # a 10 mV DAC
+    model = exact_model(u0)
+    loop = AxisLoop(axis, model, frame_period=0.1)
+    run(loop, axis, 7.003, 1, u0)  # 7.003 * 0.975 px / 4 px/V = 1.70698 V asked: the DAC holds 1.71 V
+    assert axis.sent[0] == pytest.approx(30.0 + 7.003 * 0.975 / GAIN, abs=ATOL)
+    assert axis.u == pytest.approx(31.71, abs=1e-12)
+    assert loop.u == axis.u and model.state.u == axis.u
+
+
+def test_a_move_that_ends_on_a_limit_up_to_rounding_is_at_the_limit():
+    # 40 px from 90 V is exactly 100 V; the inverse lands there up to rounding (within the 1e-9 of the
+    # range that counts as the limit) and the limit itself is sent, flagged
+    axis = LinearAxis(90.0)
+    loop = AxisLoop(axis, exact_model(90.0), frame_period=0.1, ff_margin=0.0)
+    run(loop, axis, 40.0, 1, 90.0)
+    assert axis.sent == [100.0] and loop.at_limit
+    axis = LinearAxis(90.0)
+    loop = AxisLoop(axis, exact_model(90.0), frame_period=0.1, ff_margin=0.0)
+    run(loop, axis, 39.9996, 1, 90.0)  # 1e-4 V short of it: a command like any other
+    assert axis.sent == [pytest.approx(99.9999, abs=1e-9)] and not loop.at_limit
+
+
+@pytest.mark.parametrize("kw, err", [
+    ({"ki_fine": 0.0}, "ki_fine"), ({"ki_fine": math.nan}, "ki_fine"), ({"ff_margin": 0.5}, "ff_margin"),
+    ({"ff_margin": -0.01}, "ff_margin"), ({"max_slew_v": 0.0}, "max_slew_v"), ({"max_step_px": 0.0}, "max_step_px"),
+])
+def test_bad_loop_parameters(kw, err):
+    with pytest.raises(ValueError, match=err):
+        AxisLoop(LinearAxis(50.0), exact_model(50.0), frame_period=0.1, **kw)
+
+
+def test_bad_axes_models_and_creep():
+    AxisLoop(LinearAxis(50.0), exact_model(50.0), frame_period=0.1, ff_margin=0.0)  # the ends that are allowed
+    with pytest.raises(ValueError, match="are empty"):
+        AxisLoop(LinearAxis(50.0, limits=(50.0, 50.0)), exact_model(50.0), frame_period=0.1)
+    with pytest.raises(ValueError, match="model is required"):
+        AxisLoop(LinearAxis(50.0), None, frame_period=0.1)
+    with pytest.raises(TypeError, match="CreepModel"):
+        AxisLoop(LinearAxis(50.0), exact_model(50.0), frame_period=0.1, creep=object())
+    # out of step: the model's state more than 1e-3 of the range (0.1 V) from the axis' command
+    AxisLoop(LinearAxis(50.09), exact_model(50.0), frame_period=0.1)
+    with pytest.raises(ValueError, match="out of step with the axis, which holds 50.11 V"):
+        AxisLoop(LinearAxis(50.11), exact_model(50.0), frame_period=0.1)
+    loop = AxisLoop(LinearAxis(50.0), exact_model(50.0), frame_period=0.1)
+    with pytest.raises(ValueError, match="not finite"):
+        loop.begin(math.inf, 0.0, 0)
