@@ -193,3 +193,17 @@ def test_pi_bad_operator_counts_and_too_few_points():
     with pytest.raises(ValueError, match=r"too few valid points \(10\) for a PI model with 9 operators"):
         fit_hysteresis(few, kind="pi", n_operators=9, shape=0.0)
     assert fit_hysteresis(few, kind="pi", n_operators=8, shape=0.0).kind == "pi"
+
+
+@pytest.mark.parametrize("kind", ["polynomial", "pi", "linear"])
+def test_without_an_ok_column_every_row_counts(kind):
+    """``ok`` is optional: a characterisation without it is fitted as if every row were valid."""
+    rng = np.random.default_rng(5)
+    char = characterisation(lambda u: 1.5 * (u - U0) + 0.002 * (u - U0) ** 2 + rng.normal(0, 0.2, u.size))
+    bare = char.drop(columns="ok")
+    bare.attrs = dict(char.attrs)
+    kw = {"shape": 0.0} if kind == "pi" else {}
+    with_ok, without = fit_hysteresis(char, kind=kind, **kw), fit_hysteresis(bare, kind=kind, **kw)
+    u = char["u"].to_numpy()
+    np.testing.assert_allclose(without.predict(u), with_ok.predict(u), atol=1e-9)
+    assert without.meta["rms_residual_px"] == pytest.approx(with_ok.meta["rms_residual_px"], rel=1e-9)
