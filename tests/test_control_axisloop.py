@@ -1,4 +1,4 @@
-"""The control law of one axis (AxisLoop, paper Fig. 8a) in a world where the model is exact: a linear
+"""The control law of one axis (AxisLoop, paper Fig. 8a) and step_response around it, in a world where the model is exact: a linear
 axis y = G (u - U0) / (Un - U0) px, no hysteresis, no noise, the command acting from the next frame.
 
 There the loop's output is known in closed form from its documented law -- the feed-forward stops
@@ -14,8 +14,16 @@ import math
 
 import numpy as np
 import pytest
+import servo_fakes
 
-from semlab.control import PID, REACH_SLOPE_FACTOR, REACH_TOLERANCE, AxisLoop
+from semlab.control import (
+    PID,
+    REACH_SLOPE_FACTOR,
+    REACH_TOLERANCE,
+    AxisLoop,
+    move_to,
+    step_response,
+)
 from semlab.hysteresis import PolynomialHysteresis
 
 G = 400.0  # px over the characterised range
@@ -61,21 +69,27 @@ def run(loop, axis, target, n, u_start, *, measure=None):
     return np.array(ys)
 
 
+def feedforward_law(step, kp, ki, margin, n, u0):
+    """Measured displacements of frames 0..n: the feed-forward lands short by margin * step, then
+    y[k+1] = step + c[k] with c the PID on the measurement (limits: the model at the axis limits)."""
+    pid = PID(kp=kp, ki=ki)
+    pid.reset(-margin * step)
+    pid.set_limits(GAIN * RANGE[0] - G * u0 / 100 - step, GAIN * RANGE[1] - G * u0 / 100 - step)
+    ys = [0.0, step * (1 - margin)]
+    for _ in range(n - 1):
+        c = pid.update(step, ys[-1])
+        pid.track(c)
+        ys.append(step + c)
+    return np.array(ys), pid
+
+
 @pytest.mark.parametrize("kp, ki, margin", [(0.0, 0.8, 0.025), (0.3, 0.5, 0.1), (0.6, 0.2, 0.0)])
 def test_feedforward_then_pid_on_the_goal_follows_its_law(kp, ki, margin):
     u0, step = 30.0, 20.0
     axis = LinearAxis(u0)
     loop = AxisLoop(axis, exact_model(u0), frame_period=0.1, pid=PID(kp=kp, ki=ki), ff_margin=margin)
     ys = run(loop, axis, step, 30, u0)
-    # oracle: the feed-forward lands short by margin * step; then y[k+1] = step + c[k] (measurement frame)
-    pid = PID(kp=kp, ki=ki)
-    pid.reset(-margin * step)
-    pid.set_limits(GAIN * RANGE[0] - G * u0 / 100 - step, GAIN * RANGE[1] - G * u0 / 100 - step)
-    expected = [0.0, step * (1 - margin)]
-    for _ in range(29):
-        c = pid.update(step, expected[-1])
-        pid.track(c)
-        expected.append(step + c)
+    expected, pid = feedforward_law(step, kp, ki, margin, 30, u0)
     np.testing.assert_allclose(ys, expected, atol=ATOL)
     assert abs(ys[-1] - step) < 1e-3 * step  # integral action: no steady-state error
     assert loop.pid.output_limits == pytest.approx(pid.output_limits)
@@ -233,3 +247,105 @@ def test_bad_axes_models_and_creep():
     loop = AxisLoop(LinearAxis(50.0), exact_model(50.0), frame_period=0.1)
     with pytest.raises(ValueError, match="not finite"):
         loop.begin(math.inf, 0.0, 0)
+
+
+# ---------------------------------------------------------------------------------------------
+# step_response / move_to around the loop: the rows are the law's, with the tracker's view of it
+# ---------------------------------------------------------------------------------------------
+
+DIRECTION = np.array([0.6, 0.8])
+ROI = (100, 100, 41, 41)  # centre (120, 120)
+
+
+class World:
+    """A microscope whose probe moves along DIRECTION by GAIN px/V of the axis' command from u0."""
+
+    frame_period = 0.1
+
+    def __init__(self, u0, **axis_kw):
+        self.axis, self.u0, self.frame = LinearAxis(u0, **axis_kw), u0, -1
+        self.model = exact_model(u0)
+        self.model.direction = tuple(DIRECTION)
+
+    def grab(self):
+        self.frame += 1
+        return np.full((400, 400), self.frame, dtype=np.int32)  # the fake tracker reads the index
+
+    def position(self):
+        return np.array([500.0, 300.0]) + GAIN * (self.axis.u - self.u0) * DIRECTION
+
+    def tracker(self, **kw):
+        return servo_fakes.FakeTracker(position=self.position, **kw)
+
+
+def test_step_response_rows_are_the_feedforward_law_seen_by_the_tracker():
+    w = World(30.0)
+    resp = step_response(w, w.axis, ROI, 20.0, model=w.model, pid=PID(kp=0.3, ki=0.5), tracker=w.tracker(),
+                         n_frames=12)
+    expected, _ = feedforward_law(20.0, 0.3, 0.5, 0.025, 11, 30.0)
+    np.testing.assert_allclose(resp["displacement"], expected, atol=ATOL)
+    centre = np.array([120.0, 120.0])
+    np.testing.assert_allclose(resp[["x", "y"]], centre + np.outer(expected, DIRECTION), atol=ATOL)
+    assert list(resp["frame"]) == list(range(12))
+    np.testing.assert_allclose(resp["t"], 0.1 * np.arange(12), atol=1e-12)
+    # u: the command in effect while the frame was taken (row 0: the start; then one frame late)
+    np.testing.assert_allclose(resp["u"], [30.0] + w.axis.sent[:11], atol=1e-12)
+    np.testing.assert_allclose(resp["u"].iloc[1:], 30.0 + expected[1:] / GAIN, atol=ATOL)
+    assert (resp["target"] == 20.0).all() and resp["ok"].all() and not resp["held"].any()
+    assert not resp["at_limit"].any()
+    assert list(resp["stage"]) == ["start"] + ["feedforward"] * 11
+    assert resp.attrs["direction"] == pytest.approx(tuple(DIRECTION)) and resp.attrs["origin"] == (120.0, 120.0)
+    assert resp.attrs["feedforward"] is True and resp.attrs["frame_period"] == 0.1
+    assert resp.attrs["model"] == "polynomial" and resp.attrs["axis"] == "lin 0 x"
+    assert resp.attrs["warmup_frames"] == 0 and resp.attrs["warmup_lost"] == 0
+
+
+def test_a_lost_frame_holds_the_command_and_the_law_resumes_one_frame_later():
+    w = World(30.0)
+    resp = step_response(w, w.axis, ROI, 20.0, model=w.model, pid=PID(kp=0.3, ki=0.5),
+                         tracker=w.tracker(lose={4}), n_frames=12)
+    expected, _ = feedforward_law(20.0, 0.3, 0.5, 0.025, 10, 30.0)
+    d = resp["displacement"].to_numpy()
+    assert np.isnan(d[4]) and not resp["ok"][4] and resp["held"][4] and resp["held"].sum() == 1
+    # no command after the lost frame: frame 5 sees frame 4's position, then the law goes on
+    np.testing.assert_allclose(np.r_[d[:4], d[5:]], expected, atol=ATOL)
+    assert resp["u"][5] == resp["u"][4]
+
+
+def test_pid_only_step_and_move_to_follow_their_law():
+    w = World(60.0)
+    resp = step_response(w, w.axis, ROI, -15.0, model=w.model, feedforward=False, pid=PID(kp=0.2, ki=0.4),
+                         tracker=w.tracker(), n_frames=8)
+    pid = PID(kp=0.2, ki=0.4)
+    pid.set_limits((RANGE[0] - 60.0) * GAIN, (RANGE[1] - 60.0) * GAIN)
+    expected = [0.0]
+    for _ in range(7):
+        c = pid.update(-15.0, expected[-1])
+        pid.track(c)
+        expected.append(c)
+    np.testing.assert_allclose(resp["displacement"], expected, atol=ATOL)
+    assert list(resp["stage"]) == ["start"] + ["pid"] * 7 and resp.attrs["feedforward"] is False
+    w = World(30.0)
+    moved = move_to(w, w.axis, ROI, 20.0, model=w.model, pid=PID(kp=0.3, ki=0.5), tracker=w.tracker(), n_frames=11)
+    np.testing.assert_allclose(moved["displacement"], feedforward_law(20.0, 0.3, 0.5, 0.025, 11, 30.0)[0],
+                               atol=ATOL)
+    assert list(moved["stage"]) == ["start"] + ["nano"] * 11 and (moved["target"] == 20.0).all()
+
+
+def test_step_response_refuses_before_anything_moves():
+    w = World(90.0)  # 40 px of reach upwards, 44 px generous
+    with pytest.raises(ValueError, match="step of 45 px is outside"):
+        step_response(w, w.axis, ROI, 45.0, model=w.model, tracker=w.tracker())
+    with pytest.raises(ValueError, match="not finite"):
+        step_response(w, w.axis, ROI, math.nan, model=w.model, tracker=w.tracker())
+    with pytest.raises(ValueError, match="n_frames must be >= 2"):
+        step_response(w, w.axis, ROI, 1.0, model=w.model, tracker=w.tracker(), n_frames=1)
+    with pytest.raises(TypeError, match=r"unknown parameter\(s\) \['gain'\]"):
+        step_response(w, w.axis, ROI, 1.0, model=w.model, tracker=w.tracker(), gain=2.0)
+    # 40 px along (0.6, 0.8) takes the 41-px ROI at (100, 100) to (124, 132): inside a 400x400 frame;
+    # a 41-px ROI at (340, 100) would go to x = 364 + 41 > 400.5: refused, nothing sent
+    with pytest.raises(ValueError, match="out of the 400x400 frame"):
+        step_response(w, w.axis, (340, 100, 41, 41), 40.0, model=w.model, tracker=w.tracker())
+    with pytest.raises(ValueError, match="beyond the piezo; pass macro="):
+        move_to(w, w.axis, ROI, 45.0, model=w.model, tracker=w.tracker())
+    assert w.axis.sent == []
