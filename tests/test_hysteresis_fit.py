@@ -207,3 +207,38 @@ def test_without_an_ok_column_every_row_counts(kind):
     u = char["u"].to_numpy()
     np.testing.assert_allclose(without.predict(u), with_ok.predict(u), atol=1e-9)
     assert without.meta["rms_residual_px"] == pytest.approx(with_ok.meta["rms_residual_px"], rel=1e-9)
+
+
+def test_a_branch_swept_the_wrong_way_is_refused_at_its_row():
+    char = characterisation(lambda u: 1.5 * (u - U0))
+    for label, verb in (("ascending", "falls"), ("descending", "rises")):
+        bad = char.copy()
+        bad.attrs = dict(char.attrs)
+        i, j = bad.index[bad["branch"] == label][[6, 7]]
+        bad.loc[[i, j], "u"] = bad.loc[[j, i], "u"].to_numpy()  # one step backwards at row j
+        with pytest.raises(ValueError, match=rf"the voltage on the '{label}' branch {verb} at row {j};"):
+            fit_hysteresis(bad)
+
+
+def test_the_range_is_the_characterisation_s_attrs_else_its_voltages():
+    char = characterisation(lambda u: 1.5 * (u - U0))
+    wide = char.copy()
+    wide.attrs = dict(char.attrs, u_min=U0 - 5.0, u_max=UN + 5.0)  # U0, Un as the experiment declared them
+    assert fit_hysteresis(wide).u_range == (U0 - 5.0, UN + 5.0)
+    bare = char.copy()
+    bare.attrs = {}
+    m = fit_hysteresis(bare)
+    assert m.u_range == (U0, UN) and m.axis == "unknown" and m.direction == (1.0, 0.0)
+
+
+def test_voltages_that_are_not_numbers_are_refused_and_an_object_column_is_read():
+    char = characterisation(lambda u: 1.5 * (u - U0))
+    nan = char.copy()
+    nan.attrs = dict(char.attrs)
+    nan.loc[nan.index[3], "u"] = np.nan
+    with pytest.raises(ValueError, match="characterisation has non-finite voltages"):
+        fit_hysteresis(nan)
+    as_objects = char.astype({"u": object})  # e.g. a table assembled from Python floats
+    as_objects.attrs = dict(char.attrs)
+    u = char["u"].to_numpy()
+    np.testing.assert_allclose(fit_hysteresis(as_objects).predict(u), fit_hysteresis(char).predict(u), atol=1e-9)
