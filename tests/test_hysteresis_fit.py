@@ -238,7 +238,51 @@ def test_voltages_that_are_not_numbers_are_refused_and_an_object_column_is_read(
     nan.loc[nan.index[3], "u"] = np.nan
     with pytest.raises(ValueError, match="characterisation has non-finite voltages"):
         fit_hysteresis(nan)
-    as_objects = char.astype({"u": object})  # e.g. a table assembled from Python floats
+    as_objects = char.astype({"u": object, "displacement": object, "ok": object})  # e.g. built from Python values
     as_objects.attrs = dict(char.attrs)
     u = char["u"].to_numpy()
     np.testing.assert_allclose(fit_hysteresis(as_objects).predict(u), fit_hysteresis(char).predict(u), atol=1e-9)
+
+
+def test_the_linear_kind_is_the_least_squares_line_through_both_branches():
+    rng = np.random.default_rng(8)
+    char = characterisation(lambda u: 1.5 * (u - U0) + 0.01 * (u - U0) ** 2 + rng.normal(0, 0.3, u.size))
+    m = fit_hysteresis(char, kind="linear")
+    major = char[char["branch"].isin(["ascending", "descending"])]
+    slope, icept = np.polyfit(major["u"], major["displacement"], 1)
+    us = np.linspace(U0, UN, 7)
+    np.testing.assert_allclose(m.ascending(us), slope * us + icept, atol=1e-8)
+    np.testing.assert_allclose(m.descending(us), slope * us + icept, atol=1e-8)
+
+
+def test_the_residual_is_of_the_path_from_its_start_whatever_state_it_ended_in():
+    """A characterisation cut short at an inner turning point leaves the model's memory mid-loop; the
+    residual figure still replays the path from U0 (as the characterisation ran)."""
+    truth = PolynomialHysteresis(P_COEF, D_COEF, (U0, UN), axis="m0.x")
+    full = characterisation(truth)
+    turns = np.flatnonzero(np.diff(np.sign(np.diff(full["u"].to_numpy()))) != 0) + 1
+    cut = full.iloc[: turns[-1] + 1].copy()  # ends on the last turning point, mid-range
+    cut.attrs = dict(full.attrs)
+    cut["displacement"] += np.where(np.arange(len(cut)) % 2, 0.1, -0.1)  # a known +-0.1 px misfit
+    m = fit_hysteresis(cut)
+    res = cut["displacement"].to_numpy() - m.predict(cut["u"].to_numpy(), reset=True)
+    assert m.meta["rms_residual_px"] == pytest.approx(np.sqrt(np.mean(res**2)), rel=1e-9)
+    assert U0 < m.state.u < UN  # the memory is where the path ended
+
+
+def test_messages_of_the_refusals():
+    char = characterisation(lambda u: 1.5 * (u - U0))
+    flat = char.copy()
+    flat.attrs = dict(char.attrs, u_min=10.0, u_max=10.0)
+    with pytest.raises(ValueError, match="characterisation spans no voltage range"):
+        fit_hysteresis(flat)
+    backwards = char.assign(displacement=-char["displacement"])
+    backwards.attrs = dict(char.attrs)
+    with pytest.raises(ValueError, match="non-monotonic characterisation: the displacement does not follow the "
+                                         r"voltage \(range 90 px, correlation -1.00\)"):
+        fit_hysteresis(backwards)
+    few = char.copy()
+    few.attrs = dict(char.attrs)
+    few["ok"] = ~few.index.isin(few.index[few["branch"] == "descending"][4:])
+    with pytest.raises(ValueError, match="the descending branch has 4 valid distinct voltage"):
+        fit_hysteresis(few)
