@@ -349,3 +349,79 @@ def test_step_response_refuses_before_anything_moves():
     with pytest.raises(ValueError, match="beyond the piezo; pass macro="):
         move_to(w, w.axis, ROI, 45.0, model=w.model, tracker=w.tracker())
     assert w.axis.sent == []
+
+
+class StaleTracker:
+    """Reports the last position it saw, flagged lost, on the frames in ``stale`` (a tracker that keeps
+    its previous answer when it fails): the row's displacement must not be that stale number."""
+
+    def __init__(self, world, stale):
+        self.inner, self.stale, self.last = world.tracker(), set(stale), None
+
+    def init(self, frame, roi):
+        self.inner.init(frame, roi)
+
+    def update(self, frame):
+        if int(frame[0, 0]) in self.stale:
+            return (*self.last[:2], 0.0, False)
+        self.last = self.inner.update(frame)
+        return self.last
+
+
+def test_a_frame_flagged_lost_with_a_stale_position_has_no_displacement():
+    w = World(30.0)
+    resp = step_response(w, w.axis, ROI, 20.0, model=w.model, tracker=StaleTracker(w, {3}), n_frames=6)
+    assert np.isfinite(resp["x"][3]) and np.isnan(resp["displacement"][3])
+    assert not resp["ok"][3] and resp["held"][3]
+
+
+def test_warm_up_counts_its_lost_frames():
+    w = World(30.0)
+    resp = step_response(w, w.axis, ROI, 20.0, model=w.model, tracker=w.tracker(lose={1, 4}), n_frames=4,
+                         warmup_frames=10)
+    assert resp.attrs["warmup_frames"] == 10 and resp.attrs["warmup_lost"] == 2
+    assert resp.attrs["warmup_s"] == pytest.approx(1.0)
+    # a still probe: the line through the last warm-up positions is flat, the start is the ROI centre
+    assert resp.attrs["warmup_drift_px_per_frame"] == pytest.approx(0.0, abs=1e-9)
+    assert resp.attrs["origin"] == pytest.approx((120.0, 120.0), abs=1e-9)
+
+
+def test_the_servo_s_reach_is_its_loop_s_from_the_measured_position():
+    from semlab.control import VisualServo
+
+    w = World(90.0)
+    servo = VisualServo(w, w.axis, w.model, tracker=w.tracker())
+    servo.start(ROI)
+    assert servo.reachable() == pytest.approx((-360.0, 40.0), abs=ATOL)  # 0 .. 100 V from 90 V, 4 px/V
+    assert servo.reachable(generous=True) == pytest.approx((-396.0, 44.0), abs=ATOL)  # + REACH_TOLERANCE
+
+
+class Macro:
+    """A macro stepper: +1 nm moves the probe 0.01 px along DIRECTION (100 nm per px)."""
+
+    limits = (0.0, 1e6)
+
+    def __init__(self):
+        self.position_nm = 5e5
+
+    def move_to(self, nm):
+        self.position_nm = float(nm)
+
+
+def test_macro_hand_over_in_chunks_then_the_piezo_finishes():
+    w = World(50.0)  # the piezo reaches -200 .. +200 px from here: 300 px needs the macro stage
+    macro = Macro()
+    base = w.position
+    w.position = lambda: base() + 0.01 * (macro.position_nm - 5e5) * DIRECTION
+    w.pixel_size_nm = 100.0  # read from the microscope when not given
+    resp = move_to(w, w.axis, ROI, 300.0, model=w.model, macro=macro, tracker=w.tracker(), n_frames=30)
+    m = resp[resp["stage"] == "macro"]
+    # chunks of 40 px until the target is within a quarter of the reach (100 px) of its middle: 5 chunks,
+    # each with 2 settle frames, every one tracked
+    assert len(m) == 10 and m["ok"].all() and not m["held"].any()
+    np.testing.assert_allclose(m["displacement"], np.repeat([40.0, 80.0, 120.0, 160.0, 200.0], 2), atol=ATOL)
+    assert macro.position_nm == pytest.approx(5e5 + 200.0 * 100.0)
+    nano = resp[resp["stage"] == "nano"]
+    # then the law: the feed-forward lands 2.5 % of the remaining 100 px short, the PID (ki = 0.8, kp = 0)
+    # takes e[k+1] = (1 - ki) e[k]: 2.5 px x 0.2^28 is far below 1e-6 px at the end
+    assert len(nano) == 30 and abs(nano["displacement"].iloc[-1] - 300.0) < 1e-6
