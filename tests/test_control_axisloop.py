@@ -338,7 +338,7 @@ def test_step_response_refuses_before_anything_moves():
         step_response(w, w.axis, ROI, 45.0, model=w.model, tracker=w.tracker())
     with pytest.raises(ValueError, match="not finite"):
         step_response(w, w.axis, ROI, math.nan, model=w.model, tracker=w.tracker())
-    with pytest.raises(ValueError, match="n_frames must be >= 2"):
+    with pytest.raises(ValueError, match="^n_frames must be >= 2$"):
         step_response(w, w.axis, ROI, 1.0, model=w.model, tracker=w.tracker(), n_frames=1)
     with pytest.raises(TypeError, match=r"unknown parameter\(s\) \['gain'\]"):
         step_response(w, w.axis, ROI, 1.0, model=w.model, tracker=w.tracker(), gain=2.0)
@@ -346,7 +346,7 @@ def test_step_response_refuses_before_anything_moves():
     # a 41-px ROI at (340, 100) would go to x = 364 + 41 > 400.5: refused, nothing sent
     with pytest.raises(ValueError, match="out of the 400x400 frame"):
         step_response(w, w.axis, (340, 100, 41, 41), 40.0, model=w.model, tracker=w.tracker())
-    with pytest.raises(ValueError, match="beyond the piezo; pass macro="):
+    with pytest.raises(ValueError, match=r"^a move of 45 px is outside .*: it is beyond the piezo; pass macro="):
         move_to(w, w.axis, ROI, 45.0, model=w.model, tracker=w.tracker())
     assert w.axis.sent == []
 
@@ -425,3 +425,10 @@ def test_macro_hand_over_in_chunks_then_the_piezo_finishes():
     # then the law: the feed-forward lands 2.5 % of the remaining 100 px short, the PID (ki = 0.8, kp = 0)
     # takes e[k+1] = (1 - ki) e[k]: 2.5 px x 0.2^28 is far below 1e-6 px at the end
     assert len(nano) == 30 and abs(nano["displacement"].iloc[-1] - 300.0) < 1e-6
+
+
+def test_step_response_passes_max_step_px_on_to_the_loop():
+    w = World(30.0)
+    resp = step_response(w, w.axis, ROI, 20.0, model=w.model, tracker=w.tracker(), n_frames=6, max_step_px=6.0)
+    # the feed-forward's 19.5 px in steps of 6 px (one per frame), the measurement unused meanwhile
+    np.testing.assert_allclose(resp["displacement"][:5], [0.0, 6.0, 12.0, 18.0, 19.5], atol=ATOL)
