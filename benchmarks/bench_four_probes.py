@@ -25,6 +25,7 @@ from tqdm.auto import tqdm
 
 from semlab.evaluation.runner import parse_seeds
 from semlab.peers import MatchTemplatePeer
+from semlab.roi import clip_window
 from semlab.sim import SimulatedRig
 from semlab.tracking import Tracker
 
@@ -36,13 +37,6 @@ ROI_SIDE = 120
 SWEEP_FRACTION = 0.1
 #: The issue's throughput target for the four probes together (frames/s).
 TARGET_FPS = 100.0
-
-
-def _rois(tips, shape):
-    h, w = shape
-    half = (ROI_SIDE - 1) / 2
-    return [(int(min(max(round(x - half), 0), w - ROI_SIDE)), int(min(max(round(y - half), 0), h - ROI_SIDE)),
-             ROI_SIDE, ROI_SIDE) for x, y in tips]
 
 
 def _drive(rig, rest, k, n_frames):
@@ -67,7 +61,7 @@ def run_seed(seed: int, n_frames: int) -> list[dict]:
         truth.append(rig.truth[["x", "y"]].to_numpy().copy())
     truth = np.asarray(truth)
     travel = np.ptp(truth, axis=0)
-    rois = _rois(truth[0], frames[0].shape)
+    rois = [clip_window(x, y, ROI_SIDE, ROI_SIDE, frames[0].shape) for x, y in truth[0]]
     rows = []
     for name, make in (("semlab", Tracker), ("opencv TM_CCOEFF_NORMED", lambda: MatchTemplatePeer("TM_CCOEFF_NORMED"))):
         trackers = [make() for _ in rois]

@@ -606,7 +606,7 @@ def _track_table(df, seq, *, sigma=False):
     )
     if sigma:
         for axis in ("sigma_x", "sigma_y"):
-            table[axis] = df[axis].astype(float).to_numpy() if axis in df else np.nan
+            table[axis] = df[axis].astype(float).to_numpy()
     return table
 
 

@@ -307,11 +307,12 @@ class Tracker:
         found = None if motion.lost else method.follow(arr, predicted, motion)
         if not method.good(found):
             found = method.search(arr, window, predicted, found)
-            whole = search_window(self.roi, self.options.search.search_size, predicted, arr.shape, whole=True)
-            if method.widens_search and not motion.lost and not method.acceptable(found) and window != whole:
+            if method.widens_search and not motion.lost and not method.acceptable(found):
                 # Farther than the window reaches (a feed-forward step, the paper's 200-px moves in
                 # two frames): the whole frame before giving up, rather than a lost frame.
-                found = method.search(arr, whole, predicted, found)
+                whole = search_window(self.roi, self.options.search.search_size, predicted, arr.shape, whole=True)
+                if whole != window:
+                    found = method.search(arr, whole, predicted, found)
         if not motion.lost and not method.acceptable(found):
             verdict = method.reacquire(arr, window, predicted)
             if verdict is not None:
