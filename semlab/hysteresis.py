@@ -548,6 +548,10 @@ class PolynomialHysteresis(HysteresisModel):
         return _newton_bisect(f, end[0], u_from, y_t, xtol=xtol)
 
 
+#: Round-off (in the shaped input's unit range) of the PI inverse operator's sums.
+SHAPED_ROUND_OFF = 1e-12
+
+
 class PIHysteresis(HysteresisModel):
     """Prandtl-Ishlinskii model with an analytic inverse.
 
@@ -609,9 +613,11 @@ class PIHysteresis(HysteresisModel):
     def _u(self, v):
         a, k = self.shape, EXTRAPOLATION_SLOPE_FACTOR
         v = float(v)
-        if v > 1.0:
+        # The inverse operator's sums round: a v within round-off of an end is that end, not a
+        # step (by 1e-14 V) beyond the characterised range.
+        if v > 1.0 + SHAPED_ROUND_OFF:
             s = 1.0 + (v - 1.0) / (k * (1.0 - a))
-        elif v < 0.0:
+        elif v < -SHAPED_ROUND_OFF:
             s = v / (k * (1.0 + a))
         else:
             # the root in [0, 1] of a s^2 - (1 + a) s + v = 0, in the form without cancellation

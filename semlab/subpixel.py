@@ -344,6 +344,9 @@ class GaussNewtonResult:
         The normal matrix the shift's covariance takes: as ``normal_matrix``, but with two-level
         photometry always with the levels eliminated (the step switches to the plain one once it
         is small).
+    residual : (K,) ndarray or None
+        The last residuals ``I(x + p) − g·T − o`` (each background sector's level removed), those
+        of ``samples``; None when no step was computed.
     """
 
     shift: np.ndarray
@@ -360,6 +363,7 @@ class GaussNewtonResult:
     weight_total: float = float("nan")
     robust_ssr: float = float("nan")
     information: np.ndarray | None = None
+    residual: np.ndarray | None = None
 
 
 def _remap_points(image, xs, ys):
@@ -762,7 +766,7 @@ class _GaussNewton:
             # the background's means), whatever the last step used.
             information = (g * g * (robust @ self.setup["absorbed_hess"])).reshape(2, 2)
         return GaussNewtonResult(
-            information=information,
+            information=information, residual=residual,
             shift=p, gain=g, offset=o, weights=robust, inliers=np.count_nonzero(robust >= 1.0) / robust.size,
             iterations=it, converged=converged,
             samples=samples if samples is not None else np.full_like(self.t, np.nan),

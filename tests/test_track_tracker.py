@@ -91,6 +91,7 @@ CONTRACT = {
     "jacobian_denoise": 0.8, "reidentify": False,
     # issue 14: answers too uncertain to trust are flagged (semlab.tracking.uncertainty.SIGMA_LIMIT_PX)
     "max_sigma": 0.35,
+    "max_influence": 0.5,
 }
 
 

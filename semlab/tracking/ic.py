@@ -17,10 +17,11 @@ import numpy as np
 from ..template import identify_contour_template
 from .averaging import TemplateAverager, consistency_weights, store_frame
 from .band import MIN_BAND_PIXELS, build_band_model, registration_band
+from .consistency import band_quadrants, quadrant_influence
 from .method import Method, Motion, Setup, Verdict
 from .registration import FitResult, Start, register
 from .search import coarse_mask, coarse_search, coarse_template, reacquire
-from .uncertainty import Uncertainty, model_error, position_sigma
+from .uncertainty import Uncertainty, band_tiles, clustered_covariance, model_error, position_sigma
 
 __all__ = ["ICMethod"]
 
@@ -81,6 +82,8 @@ class ICMethod(Method):
         if self._coarse_mask is None:  # made once per contour: frame 0's, then the averaged template's
             self._coarse_mask = coarse_mask(self.contour.region, self.band, factor)
         self.coarse = coarse_template(self.template, self._coarse_mask, factor)
+        self.quadrants = band_quadrants(self.model.points)
+        self.tiles = band_tiles(self.model.points)
 
     def _register(self, arr, start: Start, **kw) -> FitResult:
         return register(arr, self.model, start, self.roi, self.options, **kw)
@@ -177,10 +180,44 @@ class ICMethod(Method):
         if found is None:
             return Uncertainty((np.inf, np.inf), (np.inf, np.inf))
         cov = found.covariance() if isinstance(found, FitResult) else found.covariance
-        cov = np.full((2, 2), np.inf) if cov is None else cov
+        cov = np.full((2, 2), np.inf) if cov is None else self._no_less_than_clustered(cov, found)
         moved = float(np.hypot(*(np.asarray(verdict.shift, float) - self.origin)))
         return Uncertainty(position_sigma(cov, self.origin_cov, model_sd=model_error(moved)),
-                           position_sigma(cov, self.origin_cov))
+                           position_sigma(cov, self.origin_cov), self._influence(found))
+
+    def _band_residuals(self, fit):
+        """``(jacobian, residual, weights)`` of a registration at the band's pixels, or None (a
+        re-acquired match, a band cut by the image border)."""
+        model = self.model
+        if not isinstance(fit, FitResult) or fit.residual is None or len(fit.residual) != len(model.points):
+            return None
+        prior = 1.0 if model.weights is None else model.weights
+        jacobian = fit.gain * np.stack([model.fine.gx, model.fine.gy], axis=1)
+        return jacobian, fit.residual, prior * fit.weights
+
+    def _no_less_than_clustered(self, cov, fit) -> np.ndarray:
+        """The fit's covariance, each axis's variance raised to the clustered covariance's where
+        that is larger (a misfit correlated over a few px: :func:`~semlab.tracking.uncertainty.
+        clustered_covariance`)."""
+        parts = self._band_residuals(fit)
+        if parts is None:
+            return cov
+        clustered = clustered_covariance(*parts, self.tiles)
+        if not np.all(np.isfinite(clustered)):
+            return cov
+        raised = np.array(cov, float)
+        for k in range(2):
+            raised[k, k] = max(raised[k, k], clustered[k, k])
+        return raised
+
+    def _influence(self, fit):
+        """How far one quadrant of the band pulls the registration's answer
+        (:func:`~semlab.tracking.consistency.quadrant_influence`); None when it cannot be judged."""
+        parts = self._band_residuals(fit)
+        variance = fit.covariance_scale() if parts is not None else np.inf
+        if not np.isfinite(variance):
+            return None
+        return quadrant_influence(*parts, variance, self.quadrants)
 
     def after_accept(self, arr, verdict: Verdict) -> np.ndarray | None:
         """The frame enters the template average when it registered well. The answer is the shift

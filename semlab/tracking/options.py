@@ -14,6 +14,7 @@ import dataclasses
 import inspect
 from dataclasses import dataclass, field
 
+from .consistency import MAX_INFLUENCE_PX
 from .uncertainty import SIGMA_LIMIT_PX
 
 __all__ = [
@@ -230,19 +231,25 @@ class AveragingOptions:
 class LossOptions:
     """When a frame counts as lost: an absolute score (None: the method's :data:`MIN_SCORE`) and,
     for ``"ic"``, a fraction of the first frames' typical score; and when an answer is too
-    uncertain to trust (``"ic"``: either axis's sigma above ``max_sigma`` px, None: never)."""
+    uncertain to trust (``"ic"``: either axis's sigma above ``max_sigma`` px, None: never) or too
+    inconsistent (``"ic"``: one quadrant of the band moving the answer by more than ``max_influence``
+    px, significantly; None: never)."""
 
     min_score: float | None = None
     min_relative_score: float = MIN_RELATIVE_SCORE
     max_sigma: float | None = SIGMA_LIMIT_PX
+    max_influence: float | None = MAX_INFLUENCE_PX
 
     def __post_init__(self):
         if not 0 <= self.min_relative_score < 1:
             _refuse("min_relative_score", self.min_relative_score, "lie in [0, 1)")
         if self.max_sigma is not None and not self.max_sigma > 0:
             _refuse("max_sigma", self.max_sigma, "be > 0 px or None")
+        if self.max_influence is not None and not self.max_influence > 0:
+            _refuse("max_influence", self.max_influence, "be > 0 px or None")
         _normalise(self, min_relative_score=float(self.min_relative_score),
-                   max_sigma=None if self.max_sigma is None else float(self.max_sigma))
+                   max_sigma=None if self.max_sigma is None else float(self.max_sigma),
+                   max_influence=None if self.max_influence is None else float(self.max_influence))
 
 
 #: The groups in the order the Tracker's signature lists them: ``TrackerOptions`` field -> class.

@@ -94,6 +94,10 @@ class FitResult:
         Their robust weights' total.
     robust_ssr : float
         The residuals' squared influence (:class:`semlab.subpixel.GaussNewtonResult`).
+    information : ndarray or None
+        The shift's information (:class:`semlab.subpixel.GaussNewtonResult`).
+    residual, weights : (K,) ndarray or None
+        The last stage's residuals and robust weights at the band's pixels.
     """
 
     shift: np.ndarray
@@ -109,6 +113,16 @@ class FitResult:
     weight_total: float
     robust_ssr: float = float("nan")
     information: np.ndarray | None = None
+    residual: np.ndarray | None = None
+    weights: np.ndarray | None = None
+
+    def covariance_scale(self) -> float:
+        """``s²``, the residuals' variance as :meth:`covariance` takes it (inf when there is none)."""
+        matrix = self.normal_matrix if self.information is None else self.information
+        dof = self.weight_total - (0 if matrix is None else len(matrix)) - FIT_NUISANCE_PARAMETERS
+        if matrix is None or not dof > 0 or not np.isfinite(self.robust_ssr):
+            return float("inf")
+        return float(self.robust_ssr / dof)
 
     def covariance(self) -> np.ndarray:
         """The shift's covariance (px², 2×2) from this fit alone: ``s² N⁻¹``.
@@ -122,10 +136,10 @@ class FitResult:
         Infinite when the fit left nothing to judge it by.
         """
         inf = np.full((2, 2), np.inf)
-        matrix = self.normal_matrix if self.information is None else self.information
-        dof = self.weight_total - (0 if matrix is None else len(matrix)) - FIT_NUISANCE_PARAMETERS
-        if matrix is None or not dof > 0 or not np.isfinite(self.robust_ssr):
+        scale = self.covariance_scale()
+        if not np.isfinite(scale):
             return inf
+        matrix = self.normal_matrix if self.information is None else self.information
         symmetric = 0.5 * (matrix + matrix.T)
         try:
             inverse = np.linalg.inv(symmetric)[:2, :2]
@@ -133,7 +147,7 @@ class FitResult:
             return inf
         if not (np.all(np.isfinite(inverse)) and inverse[0, 0] > 0 and inverse[1, 1] > 0):
             return inf
-        return (self.robust_ssr / dof) * inverse
+        return scale * inverse
 
     @classmethod
     def of(cls, fit: GaussNewtonResult, score: float, converged: bool | None = None) -> FitResult:
@@ -141,7 +155,7 @@ class FitResult:
                    converged=fit.converged if converged is None else converged, inliers=fit.inliers,
                    iterations=fit.iterations, normal_matrix=fit.normal_matrix, weighted_ssr=fit.weighted_ssr,
                    n_pixels=fit.n_pixels, weight_total=fit.weight_total, robust_ssr=fit.robust_ssr,
-                   information=fit.information)
+                   information=fit.information, residual=fit.residual, weights=fit.weights)
 
 
 @dataclass(frozen=True)

@@ -19,6 +19,7 @@ from .options import DEFAULT_METHOD, KEYWORD_GROUP, TrackerOptions
 from .paper import ContourMethod, HBMethod, SSDMethod
 from .result import TrackResult
 from .search import search_window
+from .consistency import inconsistent
 from .uncertainty import too_uncertain
 
 __all__ = ["METHOD_CLASSES", "Tracker"]
@@ -130,6 +131,12 @@ class Tracker:
         ("too uncertain"; the tracker follows it all the same). The default,
         :data:`~semlab.tracking.uncertainty.SIGMA_LIMIT_PX`, keeps frames more than 1 px off below
         0.5 %; None never flags.
+    max_influence : float or None
+        ``"ic"``: an answer that one quadrant of the band moves by more than this many px
+        (significantly: it disagrees with the rest beyond the noise) is reported ``ok=False``
+        ("inconsistent": a part of the template does not move with the object, or clutter covers
+        it; :mod:`semlab.tracking.consistency`); the tracker follows it all the same. None never
+        flags.
 
     An unknown keyword raises TypeError with the list of the allowed ones; the options, checked
     and grouped by concern, are :attr:`options` (:class:`~semlab.tracking.options.TrackerOptions`).
@@ -338,6 +345,13 @@ class Tracker:
             p = uncertainty.precision
             return TrackResult(float("nan"), float("nan"), result.score, False,
                                f"too uncertain: the frame allows ({p[0]:.2f}, {p[1]:.2f}) px > max_sigma {limit:g} px")
+        reach = self.options.loss.max_influence
+        if (uncertainty is not None and reach is not None and self.algorithm.flags_uncertain
+                and inconsistent(uncertainty.influence, reach)):
+            pull = uncertainty.influence
+            return TrackResult(float("nan"), float("nan"), result.score, False,
+                               f"inconsistent: one quadrant of the band moves the answer {pull.shift_px:.2f} px "
+                               f"> max_influence {reach:g} px (chi2 {pull.chi2:.0f})")
         if uncertainty is None:
             return result
         sx, sy = uncertainty.sigma

@@ -12,7 +12,8 @@ evaluation corpus's development seeds (``semlab.evaluation.DEV_SEEDS``) so that 
 
 A frame whose own data allow no better than :data:`SIGMA_LIMIT_PX` is not trusted: the tracker
 follows it (its motion state moves on) but reports ``ok=False``, so that nothing downstream (the
-servo) acts on a number that may be a pixel off.
+servo) acts on a number that may be a pixel off. What a frame's precision cannot see — a part of the
+band that disagrees with the rest — is judged by :mod:`semlab.tracking.consistency`.
 """
 
 from __future__ import annotations
@@ -24,10 +25,13 @@ import numpy as np
 
 __all__ = [
     "CALIBRATION",
+    "CLUSTER_TILE_PX",
     "INTEGER_VARIANCE_PX2",
     "MODEL_ERROR_PX",
     "SIGMA_LIMIT_PX",
     "Uncertainty",
+    "band_tiles",
+    "clustered_covariance",
     "least_squares_covariance",
     "model_error",
     "position_sigma",
@@ -50,6 +54,13 @@ MODEL_ERROR_PX = 0.25
 #: The model error reaches :data:`MODEL_ERROR_PX` once the object has moved this far (px) from where
 #: frame 0 saw it (it grows from 0, the origin, over about the edge's width).
 MODEL_ERROR_REACH_PX = 1.0
+
+
+#: The clustered covariance (:func:`clustered_covariance`) groups the band's pixels in tiles of this
+#: many px: a template's misfit (texture the template does not share, an edge profile that changed) is
+#: correlated over about an edge's width (the beam's blur and the template's smoothing, 2-4 px), so
+#: tiles this size hold one correlated patch each, and a band holds a hundred of them or more.
+CLUSTER_TILE_PX = 4
 
 
 #: Variance (px²) of rounding to the nearest pixel: a uniform error over one pixel, 1/12.
@@ -83,6 +94,55 @@ def least_squares_covariance(jacobian, residual) -> np.ndarray:
     return float(r @ r) / dof * inverse
 
 
+def band_tiles(points, tile: int = CLUSTER_TILE_PX) -> np.ndarray:
+    """Labels ``0 .. G−1`` of the ``tile``-px square each of the band's ``points`` (x, y) lies in."""
+    pts = np.asarray(points, np.float64)
+    cells = np.floor(pts / tile).astype(np.int64)
+    _, labels = np.unique(cells[:, 1] * (cells[:, 0].max() + 1) + cells[:, 0], return_inverse=True)
+    return labels.ravel()
+
+
+def clustered_covariance(jacobian, residual, weights, clusters) -> np.ndarray:
+    """Cluster-robust ("sandwich") covariance (px², 2×2) of a weighted least-squares shift.
+
+    ``N⁻¹ V N⁻¹`` with ``N = Σ w J Jᵀ`` and ``V = G/(G−1) Σ_g (s_g − s̄)(s_g − s̄)ᵀ``, ``s_g = Σ_{i∈g}
+    w_i J_i r_i`` the score of cluster ``g`` (Liang & Zeger 1986). Where the residuals are
+    independent noise it agrees with ``s² N⁻¹`` (eq. 9's covariance); where the template's misfit is
+    correlated over a few px — and so pulls the answer much more than independent noise of the
+    same size — it says so, along the direction the misfit pulls.
+
+    Parameters
+    ----------
+    jacobian : (K, 2) array_like
+        The derivative of the model at each pixel with respect to the shift.
+    residual, weights : (K,) array_like
+        The residuals at the answer and the weights of the fit (noise prior × robust weights).
+    clusters : (K,) array_like of int
+        Labels ``0 .. G−1`` (:func:`band_tiles`).
+
+    Returns
+    -------
+    (2, 2) ndarray
+        Infinite when the system is singular or there are fewer than 3 clusters.
+    """
+    j = np.asarray(jacobian, np.float64)
+    w = np.asarray(weights, np.float64)
+    labels = np.asarray(clusters, np.intp)
+    n_clusters = int(labels.max()) + 1 if labels.size else 0
+    if n_clusters < 3:
+        return np.full((2, 2), np.inf)
+    wj = j * w[:, None]
+    try:
+        inverse = np.linalg.inv(wj.T @ j)
+    except np.linalg.LinAlgError:
+        return np.full((2, 2), np.inf)
+    scores = wj * np.asarray(residual, np.float64)[:, None]
+    per_cluster = np.stack([np.bincount(labels, weights=scores[:, k], minlength=n_clusters) for k in range(2)], axis=1)
+    per_cluster -= per_cluster.mean(axis=0)
+    middle = per_cluster.T @ per_cluster * (n_clusters / (n_clusters - 1))
+    return inverse @ middle @ inverse
+
+
 class Uncertainty(NamedTuple):
     """An answer's standard uncertainty: ``sigma`` ``(x, y)`` px, what it reports (the fits and the
     model error), and ``precision``, what the frame's own data allow (the fits alone), by which it
@@ -91,6 +151,8 @@ class Uncertainty(NamedTuple):
 
     sigma: tuple[float, float]
     precision: tuple[float, float]
+    #: How far one part of the band pulls the answer (:mod:`semlab.tracking.consistency`), or None.
+    influence: object = None
 
 
 def model_error(displacement_px: float) -> float:
