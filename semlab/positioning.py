@@ -21,6 +21,7 @@ smaller than the positioner's resolution, and no command at all on a frame the t
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, field
 
@@ -182,6 +183,11 @@ def _check_positioner(positioner) -> None:
                         f"resolution_nm, position_nm); got {type(positioner).__name__}")
 
 
+#: A calibration's measurement skips at most this many frames the tracker flags before it counts the
+#: tip as lost (a flag is one frame's doubt; a lost tip stays lost).
+MAX_FLAGGED_FRAMES = 3
+
+
 class _Eye:
     """Grab and track; a frame that cannot be grabbed counts as lost (the instrument's message kept)."""
 
@@ -237,16 +243,27 @@ def _test_moves(step: float, repeats: int) -> list[tuple[str, float, float]]:
 
 
 def _measure(eye, n_settle, n_average, what):
-    """Mean position over ``n_average`` frames after ``n_settle``; CalibrationError when lost."""
-    pts = []
-    for i in range(n_settle + n_average):
+    """Mean position over ``n_average`` frames the tracker vouches for, after ``n_settle``.
+
+    A frame the tracker flags (``ok=False``: too uncertain, inconsistent) is skipped, up to
+    :data:`MAX_FLAGGED_FRAMES` of them: the tip stands still, so the next frame measures it as well.
+    More than that, and the tip counts as lost: CalibrationError.
+    """
+    pts, flagged = [], 0
+    for i in itertools.count():
+        if len(pts) >= n_average:
+            break
         x, y, _score, ok, reason = eye.look()
+        if i < n_settle:
+            continue
         if not ok:
-            raise CalibrationError(f"the tracker lost the tip {what} (frame {eye.frames}: {reason}); "
-                                   "a calibration needs every test move seen: check the ROI, the "
-                                   "focus, and that the tip stays in view")
-        if i >= n_settle:
-            pts.append((x, y))
+            flagged += 1
+            if flagged > MAX_FLAGGED_FRAMES:
+                raise CalibrationError(f"the tracker lost the tip {what} (frame {eye.frames}: {reason}); "
+                                       "a calibration needs every test move seen: check the ROI, the "
+                                       "focus, and that the tip stays in view")
+            continue
+        pts.append((x, y))
     return np.mean(pts, axis=0), np.asarray(pts)
 
 

@@ -291,3 +291,16 @@ def test_family_frames_figure(sequences):
     assert [a.get_title() for a in axes] == ["still (seed 0)", "semi_real (seed 0)"]
     assert len(axes[0].patches) == 1  # the ROI
     plt.close("all")
+
+
+@pytest.mark.parametrize("n, expected", [(10, math.inf), (20, 18.1), (11, 10.0)])
+def test_the_p90_is_infinite_exactly_when_the_interpolation_weighs_a_never_found_probe(n, expected):
+    # n sequences with ratios 1..n-1 and one never found: the 90th percentile interpolates between the
+    # (0.9(n-1))-th values; with 10 it gives the infinite one a weight of 0.1 (infinite, not 1e299), with
+    # 20 it lies between 18 and 19, with 11 it is the 10th value exactly.
+    ratios = [float(k) for k in range(1, n)] + [np.nan]
+    df = pd.DataFrame({"family": "f", "seed": range(n), "split": "test", "tracker": "t", "rmse_over_crb": ratios,
+                       "std_over_crb": 1.0, "lost_fraction": 0.0, "silent_fraction": 0.0, "flagged_fraction": 0.0,
+                       "coverage95": np.nan, "ms_per_frame": 1.0, "error": ""})
+    p90 = summarise(df).iloc[0].rmse_over_crb_p90
+    assert p90 == expected if math.isinf(expected) else p90 == pytest.approx(expected)

@@ -317,3 +317,37 @@ def test_a_malformed_roi_is_refused_before_anything_moves(calibrated):
     with pytest.raises(TypeError, match="init"):
         calibrate_positioner(rig, rig, roi_at(TIP0), tracker=object())
     assert rig.moves == []
+
+
+class _Doubting:
+    """semlab's default tracker, but frames in ``doubt`` (counted from 1) come back flagged."""
+
+    def __init__(self, doubt):
+        from semlab.tracking import Tracker
+
+        self.inner, self.doubt, self.n = Tracker(), doubt, 0
+
+    def init(self, frame, roi):
+        return self.inner.init(frame, roi)
+
+    def update(self, frame):
+        from semlab.tracking import TrackResult
+
+        self.n += 1
+        result = self.inner.update(frame)
+        if self.doubt(self.n):
+            return TrackResult(float("nan"), float("nan"), result.score, False, "inconsistent: a test's doubt")
+        return result
+
+
+def test_calibration_skips_a_few_flagged_frames_of_a_still_tip():
+    # One frame in nine flagged: every measurement still finds its frames (the tip stands still).
+    rig = StepperRig()
+    cal = calibrate_positioner(rig, rig, roi_at(TIP0), tracker=_Doubting(lambda n: n % 9 == 0))
+    assert 0 < cal.residual_px < 0.5 and len(cal.moves) == 8
+
+
+def test_calibration_gives_up_on_a_tip_the_tracker_keeps_flagging():
+    rig = StepperRig()
+    with pytest.raises(CalibrationError, match="lost the tip"):
+        calibrate_positioner(rig, rig, roi_at(TIP0), tracker=_Doubting(lambda n: n > 12))

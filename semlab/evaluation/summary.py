@@ -26,10 +26,17 @@ def _ratios(s: pd.Series) -> np.ndarray:
 
 
 def _p90(r: np.ndarray) -> float:
-    """90th percentile (linear interpolation), infinite values included as infinitely large."""
-    big = 1e300
-    p = float(np.percentile(np.where(np.isinf(r), big, r), 90))
-    return math.inf if p >= big / 10 else p
+    """90th percentile (linear interpolation, as ``np.percentile``), infinite values included as
+    infinitely large: infinite as soon as the interpolation gives an infinite value any weight."""
+    v = np.sort(np.asarray(r, float))
+    if v.size == 0:
+        return math.nan
+    position = 0.9 * (v.size - 1)
+    lo, hi = math.floor(position), math.ceil(position)
+    weight = position - lo
+    if math.isinf(v[lo]) or (weight > 0 and math.isinf(v[hi])):
+        return math.inf
+    return float(v[lo] + weight * (v[hi] - v[lo]))
 
 
 def summarise(results: pd.DataFrame) -> pd.DataFrame:
