@@ -188,12 +188,12 @@ def _claims_02(r):
     assert 0.03 <= r["contour_sigma_x_median_lowest_dose"] <= 0.07 and r["contour_std_x_lowest_dose"] > 1.0
     # "semlab's default now reports no frame more than 1 px off as ok at any dose"
     assert r["ic_silent_1px_max"] == 0
-    # "at 6.25 pA and at 12.5 pA every frame (39 of 39 each) is flagged 'too uncertain', its sigma_x (median 0.62
-    # and 0.45 px) being above max_sigma = 0.35 px ... (a cross on the bottom edge, as for the SSD baseline, which
+    # "at 6.25 pA and at 12.5 pA every frame (39 of 39 each) is flagged 'too uncertain', its sigma_x (median 0.66
+    # and 0.46 px) being above max_sigma = 0.35 px ... (a cross on the bottom edge, as for the SSD baseline, which
     # loses every frame at 6.25 pA)"
     flags = r["ic_flagged_too_uncertain"]
     assert flags["6.25"] == 39 == flags["12.5"] and r["ic_all_flagged_doses"] == [6.25, 12.5]
-    assert round(r["ic_sigma_x_median_lowest_dose_unflagged"], 2) == 0.62 and round(r["ic_sigma_x_median_12_5"], 2) == 0.45
+    assert round(r["ic_sigma_x_median_lowest_dose_unflagged"], 2) == 0.66 and round(r["ic_sigma_x_median_12_5"], 2) == 0.46
     assert r["ssd_all_lost_lowest_dose"] and r["missing_points"] >= 3   # semlab at two doses, SSD at one
     assert r["missing_points_marked"] >= r["missing_points"]
     # "At 6.25 pA, yes: they spread 0.69 px, with 4 frames more than 1 px off (the worst 3.2 px). At 12.5 pA, no: they
@@ -202,16 +202,15 @@ def _claims_02(r):
     assert round(r["free_max_error_lowest_dose"], 1) == 3.2
     assert round(r["free_std_12_5"], 2) == 0.26 and r["free_max_error_12_5"] < 0.6
     assert round(r["ssd_std_12_5"], 2) == 0.44
-    # "Where the unflagged fits are right, the sigma_x semlab reports is 1.5-2 times their measured x spread"
-    # (2.0 rounded to 2 decimals: "about 2")
-    assert 1.5 <= r["sigma_over_std_x_min"] and r["sigma_over_std_x_max"] <= 2.05
+    # "Where the unflagged fits are right, the sigma_x semlab reports is 1.6-2.1 times their measured x spread"
+    assert 1.55 <= r["sigma_over_std_x_min"] and r["sigma_over_std_x_max"] <= 2.1
     # "Where the default flags nothing (100 pA, and 50 pA in a full run) it spreads 0.11-0.13 px, 1.2-1.6 times the
-    # bound; at 25 pA (full run) it flags 4 frames of 39, none of them more than 0.7 px off without the flag"
+    # bound; at 25 pA (full run) it flags 5 frames of 39, none of them more than 0.7 px off without the flag"
     assert r["ic_trusted_doses"] == ([50.0, 100.0] if full else [100.0])
     assert 0.105 <= r["ic_std_highest_dose"] <= 0.13
     assert 1.2 <= r["ic_std_over_crb_trusted_min"] and r["ic_std_over_crb_trusted_max"] <= 1.6
     if full:
-        assert flags["25.0"] == 4 and r["free_max_error_px"]["25.0"] < 0.7
+        assert flags["25.0"] == 5 and r["free_max_error_px"]["25.0"] < 0.7
 
 
 def _claims_03(r):
@@ -343,14 +342,14 @@ def _claims_06(r):
     # RMSE (0.16-0.19 px)"
     assert r["gray25_too_uncertain"] == 0 and 0.185 <= r["gray25_sigma_x"] <= 0.215
     assert 0.155 <= r["gray25_rmse_px"] <= 0.195
-    # "With the occluder passing it flags 5 of 59 frames in a full run (none in fast mode), where its unflagged fits
+    # "With the occluder passing it flags 10 of 59 frames in a full run (none in fast mode), where its unflagged fits
     # are at most 1.06 px off. In none of these rows does semlab report a frame more than 1 px off as ok."
-    assert r["occluder_too_uncertain"] == (5 if full else 0) and r["occluder_free_max_error_px"] <= 1.065
+    assert r["occluder_too_uncertain"] == (10 if full else 0) and r["occluder_free_max_error_px"] <= 1.065
     assert r["semlab_silent_1px_hardest_max"] == 0
     # "the paper's contour tracker loses the probe in about a third of the frames (0.37; 0.33 in fast mode) and
-    # semlab's default in 8 % (its 5 flags; none in fast mode)"
+    # semlab's default in 17 % (its 10 flags; none in fast mode)"
     assert r["contour_loss_occluder"] == (0.37 if full else 0.33)
-    assert r["semlab_loss_occluder"] == (0.08 if full else 0.0)
+    assert r["semlab_loss_occluder"] == (0.17 if full else 0.0)
 
 
 def _claims_07(r):
@@ -387,11 +386,11 @@ def _claims_08(r):
     full = r["seeds"] == [0, 1]        # fast mode: test seed 0 alone (the bracketed figures)
     assert r["seeds"] in ([0], [0, 1]) and r["n_families"] == 11
     sem, peer, silent = r["semlab_rmse_over_crb"], r["best_peer_rmse_over_crb"], r["semlab_silent"]
-    ahead = ["moves_200px", "wander", "jumps", "gray_charging", "clutter", "shapes", "substrates"]
-    # "On 7 of the 11 families (...) semlab's median RMSE is below every peer's: 2.3-13x the bound (1.3-4.0x) where
+    ahead = ["moves_200px", "wander", "jumps", "gray_charging", "clutter", "shapes", "substrates", "semi_real"]
+    # "On 8 of the 11 families (...) semlab's median RMSE is below every peer's: 2.3-21x the bound (1.3-36x) where
     # the best peer is 17-1,400x (2.8-960x)"
-    assert r["semlab_ahead"] == ahead and r["semlab_behind"] == ["still", "low_dose", "thin_low_dose", "semi_real"]
-    lo, hi = (2.25, 13.0) if full else (1.25, 4.05)
+    assert r["semlab_ahead"] == ahead and r["semlab_behind"] == ["still", "low_dose", "thin_low_dose"]
+    lo, hi = (2.25, 21.5) if full else (1.25, 36.5)
     assert lo <= min(sem[f] for f in ahead) and max(sem[f] for f in ahead) <= hi
     lo, hi = (16.5, 1400.0) if full else (2.7, 965.0)
     assert lo <= min(peer[f] for f in ahead) and max(peer[f] for f in ahead) <= hi
@@ -412,28 +411,28 @@ def _claims_08(r):
     else:
         assert (r["best_peer"]["low_dose"], round(peer["low_dose"], 1)) == ("ecc", 4.7)
     assert 0.455 <= r["best_peer_silent"]["low_dose"] <= 0.725
-    # "On the thin needle at low dose it flags 82 % of the frames (64 %) and is silent on 18 % (36 %); on the
-    # semi-real needle it flags none and is silent on 46 % (92 %), at 27x the bound (48x) where the best peer is at
-    # 24x (39x)"
-    assert round(r["semlab_flagged"]["thin_low_dose"], 2) == (0.82 if full else 0.64)
-    assert round(silent["thin_low_dose"], 2) == (0.18 if full else 0.36)
-    assert r["semlab_flagged"]["semi_real"] == 0 and round(silent["semi_real"], 2) == (0.46 if full else 0.92)
-    assert round(sem["semi_real"]) == (27 if full else 48) and round(peer["semi_real"]) == (24 if full else 39)
-    # "semlab reports no frame more than 1 px off as ok on the still probe, wander, low dose, gray-level charging and
-    # shapes in both runs; issue 14's <= 0.5 % holds on 5 of the 11 families (7 on seed 0). It does not on the 200-px
-    # moves and the jumps (1-8 %), on clutter and substrates in the full run (39 % and 5 %, from seed 1), ..."
-    assert all(silent[f] == 0 for f in ("still", "wander", "low_dose", "gray_charging", "shapes"))
-    assert sum(v <= 0.005 for v in silent.values()) == (5 if full else 7)
-    assert all(0.01 <= silent[f] <= 0.08 for f in ("moves_200px", "jumps"))
+    # "On the thin needle at low dose it flags 94 % of the frames (87 %) and is silent on 6 % (13 %). On the
+    # semi-real needle semlab is ahead, at 21x the bound (36x) where the best peer is at 24x (39x), by flagging 27 % of
+    # its frames (54 %) ...; it is still silent on 19 % (38 %)"
+    assert round(r["semlab_flagged"]["thin_low_dose"], 2) == (0.94 if full else 0.87)
+    assert round(silent["thin_low_dose"], 2) == (0.06 if full else 0.13)
+    assert round(r["semlab_flagged"]["semi_real"], 2) == (0.27 if full else 0.54)
+    assert round(silent["semi_real"], 3) == (0.192 if full else 0.385)  # 5 of 26 frames; 15 of 39
+    assert round(sem["semi_real"]) == (21 if full else 36) and round(peer["semi_real"]) == (24 if full else 39)
+    # "semlab reports no frame more than 1 px off as ok on the still probe, wander, jumps, low dose, gray-level
+    # charging and shapes in both runs; issue 14's <= 0.5 % holds on 6 of the 11 families (8 on seed 0). It does not
+    # on the 200-px moves (4-8 %), on clutter and substrates in the full run (16 % and 5 %, from seed 1), ..."
+    assert all(silent[f] == 0 for f in ("still", "wander", "jumps", "low_dose", "gray_charging", "shapes"))
+    assert sum(v <= 0.005 for v in silent.values()) == (6 if full else 8)
+    assert 0.035 <= silent["moves_200px"] <= 0.08
     if full:
-        assert (round(silent["clutter"], 2), round(silent["substrates"], 2)) == (0.39, 0.05)
-    # "coverage95 ... is 0.86-1 wherever semlab is silent on at most 8 % of its frames, and 0.55 or less where it is
-    # silent on more (the thin needle, the semi-real needle, and clutter in the full run)"
+        assert (round(silent["clutter"], 2), round(silent["substrates"], 2)) == (0.16, 0.05)
+    # "coverage95 ... is 0.86-1 on every family but the semi-real needle and the thin needle at low dose (and clutter
+    # in the full run), where it is 0.6 or less and semlab is silent on 6-38 % of its frames"
     cov = r["coverage95"]
-    assert min(v for f, v in cov.items() if silent[f] <= 0.08) >= 0.86
-    high = [f for f in cov if silent[f] > 0.08]
-    assert sorted(high) == sorted(["thin_low_dose", "semi_real"] + (["clutter"] if full else []))
-    assert max(cov[f] for f in high) <= 0.55
+    low = [f for f in cov if cov[f] < 0.86]
+    assert sorted(low) == sorted(["semi_real", "thin_low_dose"] + (["clutter"] if full else []))
+    assert max(cov[f] for f in low) <= 0.6 and all(0.06 <= silent[f] <= 0.39 for f in low)
     # "No run was cut short by a tracker error."
     assert r["n_errors"] == 0
 
@@ -441,27 +440,27 @@ def _claims_08(r):
 def _claims_09(r):
     assert r["demo"]          # the claims are the Demo's: the simulator knows the truth
     # "every entry of the measured Jacobian lies within 1.5 % of the simulator's view times its move error, at most
-    # 1.5 of its standard errors off"
-    assert r["jacobian_relative_error_max"] <= 0.015 and r["jacobian_error_over_std_max"] <= 1.5
-    # "The x axis is seen at 26.4° (true 26.6°), the y axis foreshortened to 0.89 of the x axis's scale (true 0.87)
-    # and the two axes 0.7° from orthogonal (true 0.4°)"
-    assert (round(r["x_axis_angle_deg"], 1), round(r["true_x_axis_angle_deg"], 1)) == (26.4, 26.6)
+    # 2.3 of its standard errors off"
+    assert r["jacobian_relative_error_max"] <= 0.015 and r["jacobian_error_over_std_max"] <= 2.3
+    # "The x axis is seen at 26.5° (true 26.6°), the y axis foreshortened to 0.89 of the x axis's scale (true 0.87)
+    # and the two axes 0.2° from orthogonal (true 0.4°)"
+    assert (round(r["x_axis_angle_deg"], 1), round(r["true_x_axis_angle_deg"], 1)) == (26.5, 26.6)
     assert (round(r["y_over_x_scale"], 2), round(r["true_y_over_x_scale"], 2)) == (0.89, 0.87)
-    assert (round(r["skew_deg"], 1), round(r["true_skew_deg"], 1)) == (0.7, 0.4)
-    # "The fit's residual, 0.26 px on test moves of about 18 px"
-    assert round(r["fit_residual_px"], 2) == 0.26 and 17.0 <= r["test_move_px"] <= 19.0
+    assert (round(r["skew_deg"], 1), round(r["true_skew_deg"], 1)) == (0.2, 0.4)
+    # "The fit's residual, 0.25 px on test moves of about 18 px"
+    assert round(r["fit_residual_px"], 2) == 0.25 and 17.0 <= r["test_move_px"] <= 19.0
     # "After 4 still frames, a 47 px move comes within 0.5 px of the target at frame 3, tracked and true alike"
     assert r["warmup_frames"] == 4 and round(r["start_error_px"]) == 47
     assert r["first_within_0_5_px_tracked"] == 3 == r["first_within_0_5_px_true"]
-    # "the dead band (0.25 px ...) keeps the needle still ... and corrects only when that average leaves it: in fast
-    # mode's 15 frames no move is sent after landing; in a full run's 30 frames two corrections of about 10 nm follow
-    # the tip's slow drift in the image (0.30 px off by frame 17) and bring it back to 0.07 px. After landing the true
-    # distance to the target stays under 0.3 px."
+    # "the dead band (0.25 px ...) keeps the needle still ... and corrects only when that average leaves it: one
+    # correction of about 11 nm follows the landing, in fast mode's 15 frames and a full run's 30 alike. After
+    # landing the true distance to the target stays under 0.6 px (0.44 px at the end of a full run, where the
+    # tracker reads 0.32 px)"
     full = r["n_frames"] == 30
-    assert round(r["deadband_px"], 2) == 0.25 and r["moves_sent_after_landing"] == (2 if full else 0)
-    assert r["true_error_after_landing_max_px"] < 0.3
+    assert round(r["deadband_px"], 2) == 0.25 and r["moves_sent_after_landing"] == 1
+    assert 10.0 <= r["largest_move_after_landing_nm"] <= 12.0 and r["true_error_after_landing_max_px"] < 0.6
     if full:
-        assert 5.0 <= r["largest_move_after_landing_nm"] <= 15.0 and round(r["final_true_error_px"], 2) == 0.07
+        assert round(r["final_true_error_px"], 2) == 0.44 and round(r["final_tracked_error_px"], 2) == 0.32
     # "No frame of this run was flagged, so none was held"
     assert r["frames_flagged"] == 0 == r["frames_held"]
     # "the sidecar's SHA-256 is that of the CSV beside it, whose rows are the run's (15 in fast mode, 30 in a full run)"
