@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 from scipy.stats import chi2
+from test_track_uncertainty import CENTRE, ROI, wedge_frame
 
 from semlab.tracking import Tracker
 from semlab.tracking.consistency import (
@@ -17,8 +18,6 @@ from semlab.tracking.consistency import (
     inconsistent,
     quadrant_influence,
 )
-
-from test_track_uncertainty import CENTRE, ROI, wedge_frame
 
 
 def _band(n=400, seed=0):

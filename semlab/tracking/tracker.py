@@ -12,6 +12,7 @@ from ..roi import as_gray_float, check_roi, roi_centre
 from ..subpixel import NoiseModel, estimate_noise
 from ..template import ContourTemplate, identify_contour_template
 from .band import MIN_BAND_PIXELS, background_texture, band_widths, registration_band
+from .consistency import inconsistent
 from .frames import GrayScale, as_frame
 from .ic import ICMethod
 from .method import Method, Motion, Setup, Verdict
@@ -19,7 +20,6 @@ from .options import DEFAULT_METHOD, KEYWORD_GROUP, TrackerOptions
 from .paper import ContourMethod, HBMethod, SSDMethod
 from .result import TrackResult
 from .search import search_window
-from .consistency import inconsistent
 from .uncertainty import too_uncertain
 
 __all__ = ["METHOD_CLASSES", "Tracker"]

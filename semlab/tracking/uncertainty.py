@@ -23,6 +23,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .consistency import Influence
+
 __all__ = [
     "CALIBRATION",
     "CLUSTER_TILE_PX",
@@ -152,7 +154,7 @@ class Uncertainty(NamedTuple):
     sigma: tuple[float, float]
     precision: tuple[float, float]
     #: How far one part of the band pulls the answer (:mod:`semlab.tracking.consistency`), or None.
-    influence: object = None
+    influence: Influence | None = None
 
 
 def model_error(displacement_px: float) -> float:
