@@ -18,6 +18,7 @@ large χ²); neither is a reason to distrust the answer.
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -91,31 +92,57 @@ def quadrant_influence(jacobian, residual, weights, noise_variance: float, label
     jac = np.asarray(jacobian, np.float64)
     w = np.asarray(weights, np.float64)
     r = np.asarray(residual, np.float64)
-    labels = np.asarray(labels)
-    wj = jac * w[:, None]
-    normal, rhs = wj.T @ jac, wj.T @ r
-    try:
-        joint = np.linalg.solve(normal, rhs)
-    except np.linalg.LinAlgError:
+    labels = np.asarray(labels, np.intp)
+    n_groups = int(labels.max()) + 1 if labels.size else 0
+    jx, jy = jac[:, 0], jac[:, 1]
+    wx, wy = w * jx, w * jy
+
+    def per_group(values):
+        return np.bincount(labels, weights=values, minlength=n_groups)
+
+    # Each quadrant's normal matrix [[a, b], [b, c]] and right-hand side (u, v), one pass each.
+    a, b, c = per_group(wx * jx), per_group(wx * jy), per_group(wy * jy)
+    u, v = per_group(wx * r), per_group(wy * r)
+    counts = np.bincount(labels, minlength=n_groups)
+    total = (float(a.sum()), float(b.sum()), float(c.sum()))
+    whole = _inverse(*total)
+    if whole is None:
         return None
+    tu, tv = float(u.sum()), float(v.sum())
+    joint = _apply(whole, tu, tv)
     largest, chi2 = None, 0.0
-    for q in np.unique(labels):
-        mine = labels == q
-        if mine.sum() < MIN_QUADRANT_PIXELS:
+    # (2×2 algebra on Python floats: a LAPACK call per quadrant costs more than the sums.)
+    for q in np.nonzero(counts >= MIN_QUADRANT_PIXELS)[0].tolist():
+        own = (float(a[q]), float(b[q]), float(c[q]))
+        inv_q = _inverse(*own)
+        inv_rest = _inverse(total[0] - own[0], total[1] - own[1], total[2] - own[2])
+        if inv_q is None or inv_rest is None:
             continue
-        n_q, b_q = wj[mine].T @ jac[mine], wj[mine].T @ r[mine]
-        n_rest, b_rest = normal - n_q, rhs - b_q
-        try:
-            inv_q, inv_rest = np.linalg.inv(n_q), np.linalg.inv(n_rest)
-            rest = inv_rest @ b_rest
-            difference = inv_q @ b_q - rest
-            significance = float(difference @ np.linalg.solve(noise_variance * (inv_q + inv_rest), difference))
-        except np.linalg.LinAlgError:
+        rest = _apply(inv_rest, tu - float(u[q]), tv - float(v[q]))
+        mine = _apply(inv_q, float(u[q]), float(v[q]))
+        dx, dy = mine[0] - rest[0], mine[1] - rest[1]
+        spread = _inverse(*(noise_variance * (p + s) for p, s in zip(inv_q, inv_rest)))
+        if spread is None:
             continue
-        move = float(np.hypot(*(rest - joint)))
-        if np.isfinite(move) and (largest is None or move > largest):
+        significance = dx * (spread[0] * dx + spread[1] * dy) + dy * (spread[1] * dx + spread[2] * dy)
+        move = math.hypot(rest[0] - joint[0], rest[1] - joint[1])
+        if math.isfinite(move) and (largest is None or move > largest):
             largest, chi2 = move, significance
     return None if largest is None else Influence(largest, chi2)
+
+
+def _inverse(a: float, b: float, c: float):
+    """``(a', b', c')`` of the inverse of the symmetric ``[[a, b], [b, c]]``, or None unless positive definite."""
+    det = a * c - b * b
+    if not (det > 0 and a > 0 and math.isfinite(det)):
+        return None
+    return c / det, -b / det, a / det
+
+
+def _apply(inverse, u: float, v: float):
+    """The symmetric 2×2 ``inverse`` times ``(u, v)``."""
+    ia, ib, ic = inverse
+    return ia * u + ib * v, ib * u + ic * v
 
 
 def inconsistent(influence: Influence | None, max_shift_px: float = MAX_INFLUENCE_PX,
