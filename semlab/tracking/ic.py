@@ -84,6 +84,8 @@ class ICMethod(Method):
         self.coarse = coarse_template(self.template, self._coarse_mask, factor)
         self.quadrants = band_quadrants(self.model.points)
         self.tiles = band_tiles(self.model.points)
+        #: The band's template gradients (K, 2), the Jacobian up to the fit's gain.
+        self.gradients = np.stack([self.model.fine.gx, self.model.fine.gy], axis=1)
 
     def _register(self, arr, start: Start, **kw) -> FitResult:
         return register(arr, self.model, start, self.roi, self.options, **kw)
@@ -180,10 +182,11 @@ class ICMethod(Method):
         if found is None:
             return Uncertainty((np.inf, np.inf), (np.inf, np.inf))
         cov = found.covariance() if isinstance(found, FitResult) else found.covariance
-        cov = np.full((2, 2), np.inf) if cov is None else self._no_less_than_clustered(cov, found)
+        parts = self._band_residuals(found)
+        cov = np.full((2, 2), np.inf) if cov is None else self._no_less_than_clustered(cov, parts)
         moved = float(np.hypot(*(np.asarray(verdict.shift, float) - self.origin)))
         return Uncertainty(position_sigma(cov, self.origin_cov, model_sd=model_error(moved)),
-                           position_sigma(cov, self.origin_cov), self._influence(found))
+                           position_sigma(cov, self.origin_cov), self._influence(found, parts))
 
     def _band_residuals(self, fit):
         """``(jacobian, residual, weights)`` of a registration at the band's pixels, or None (a
@@ -192,14 +195,12 @@ class ICMethod(Method):
         if not isinstance(fit, FitResult) or fit.residual is None or len(fit.residual) != len(model.points):
             return None
         prior = 1.0 if model.weights is None else model.weights
-        jacobian = fit.gain * np.stack([model.fine.gx, model.fine.gy], axis=1)
-        return jacobian, fit.residual, prior * fit.weights
+        return fit.gain * self.gradients, fit.residual, prior * fit.weights
 
-    def _no_less_than_clustered(self, cov, fit) -> np.ndarray:
+    def _no_less_than_clustered(self, cov, parts) -> np.ndarray:
         """The fit's covariance, each axis's variance raised to the clustered covariance's where
         that is larger (a misfit correlated over a few px: :func:`~semlab.tracking.uncertainty.
-        clustered_covariance`)."""
-        parts = self._band_residuals(fit)
+        clustered_covariance`); ``parts``: :meth:`_band_residuals`."""
         if parts is None:
             return cov
         clustered = clustered_covariance(*parts, self.tiles)
@@ -210,10 +211,10 @@ class ICMethod(Method):
             raised[k, k] = max(raised[k, k], clustered[k, k])
         return raised
 
-    def _influence(self, fit):
+    def _influence(self, fit, parts):
         """How far one quadrant of the band pulls the registration's answer
-        (:func:`~semlab.tracking.consistency.quadrant_influence`); None when it cannot be judged."""
-        parts = self._band_residuals(fit)
+        (:func:`~semlab.tracking.consistency.quadrant_influence`); None when it cannot be judged.
+        ``parts``: :meth:`_band_residuals`."""
         variance = fit.covariance_scale() if parts is not None else np.inf
         if not np.isfinite(variance):
             return None
