@@ -10,7 +10,8 @@ STAMP  := $(VENV)/.semlab-installed
 ARGS   ?=
 # Jupyter refuses to run as root unless told: containers and fresh VMs often are root.
 ROOT_FLAG := $(shell [ "$$(id -u)" = 0 ] && echo --allow-root)
-PYTEST_ARGS ?=
+# Two test workers (pytest-xdist): the suite is CPU-bound and the machines have 2 cores.
+PYTEST_ARGS ?= -n 2
 
 .PHONY: setup lab test test-fast bench bench-servo bench-corpus bench-all chromium strip lint clean mutate
 
