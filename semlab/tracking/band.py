@@ -283,6 +283,16 @@ class BandModel:
             instrument=cut(self.instrument), fine=self.fine.subset(keep),
             smoothed=tuple(level.subset(keep) for level in self.smoothed))
 
+    def reweighted(self, keep, options: TrackerOptions) -> BandModel:
+        """The same band with the pixels outside ``keep`` weighing 0 (:mod:`semlab.tracking.trimming`).
+
+        Only the full-resolution level is set up again: a refit starts at the answer.
+        """
+        weights = np.asarray(keep, np.float64) if self.weights is None else self.weights * keep
+        fine, _ = _setups(dataclasses.replace(self.fine, setup=None), [], weights, self.inside, options)
+        return dataclasses.replace(self, weights=weights, fine=fine,
+                                   smoothed=tuple(dataclasses.replace(level, setup=None) for level in self.smoothed))
+
 
 def _jacobian_sigma(values, inside, noise: NoiseModel, n_averaged: int, options: TrackerOptions) -> float:
     """The Jacobian's smoothing: grows with the template's noise relative to its contrast."""

@@ -21,6 +21,7 @@ from .consistency import band_quadrants, quadrant_influence
 from .method import Method, Motion, Setup, Verdict
 from .registration import FitResult, Start, register
 from .search import coarse_mask, coarse_search, coarse_template, reacquire
+from .trimming import MIN_MISFIT_CONTRAST, trim_misfit_tiles
 from .uncertainty import Uncertainty, band_tiles, clustered_covariance, model_error, position_sigma
 
 __all__ = ["ICMethod"]
@@ -67,6 +68,8 @@ class ICMethod(Method):
         self.scores: list[float] = []
         self._score_median = (0, float("nan"))
         self._coarse_mask = None
+        #: The last accepted fit, when tiles were trimmed from it, and the band model it used.
+        self._trimmed = (None, None)
         self._build()
         self.averager = None
         if self.options.averaging.template_frames > 1:
@@ -84,6 +87,9 @@ class ICMethod(Method):
         self.coarse = coarse_template(self.template, self._coarse_mask, factor)
         self.quadrants = band_quadrants(self.model.points)
         self.tiles = band_tiles(self.model.points)
+        fine, inside = self.model.fine.values, self.model.inside
+        #: The object's contrast in the (whitened) template the fits' residuals are measured against.
+        self.contrast = abs(float(fine[inside].mean() - fine[~inside].mean())) if 0 < inside.sum() < len(inside) else 0.0
         #: The band's template gradients (K, 2), the Jacobian up to the fit's gain.
         self.gradients = np.stack([self.model.fine.gx, self.model.fine.gy], axis=1)
 
@@ -91,8 +97,24 @@ class ICMethod(Method):
         return register(arr, self.model, start, self.roi, self.options, **kw)
 
     def _register_stored(self, stored) -> FitResult:
-        return self._register(stored.area, Start(stored.shift, stored.gain, stored.offset), at=stored.at,
-                              robust_start=False)
+        fit = self._register(stored.area, Start(stored.shift, stored.gain, stored.offset), at=stored.at,
+                             robust_start=False)
+        return self._trim(stored.area, fit, at=stored.at)[0]
+
+    def _trim(self, arr, fit, at=(0, 0)):
+        """``(fit, model)``: the fit refitted without the band's misfit tiles
+        (:mod:`semlab.tracking.trimming`) and the band model it used (None: nothing trimmed)."""
+        p_value = self.options.stages.misfit_p_value
+        if p_value is None or not isinstance(fit, FitResult):
+            return fit, None
+
+        def refit(keep, last):
+            return register(arr, self.model.reweighted(keep, self.options), Start(last.shift, last.gain, last.offset),
+                            self.roi, self.options, at=at, robust_start=False)
+
+        trimmed, keep = trim_misfit_tiles(fit, refit, self.tiles, self.model.weights, p_value,
+                                          floor=MIN_MISFIT_CONTRAST * abs(fit.gain) * self.contrast)
+        return trimmed, (None if keep is None else self.model.reweighted(keep, self.options))
 
     # ---- the loss threshold
     def threshold(self) -> float:
@@ -170,6 +192,8 @@ class ICMethod(Method):
         if not self.model.inside_image(self.roi, fit.shift, arr.shape, margin=BAND_INSIDE_MARGIN_PX,
                                        fraction=BAND_INSIDE_FRACTION):
             return Verdict.lose("the target has left the image")
+        fit, model = self._trim(arr, fit)
+        self._trimmed = (fit, model) if model is not None else (None, None)
         self.gain, self.offset = fit.gain, fit.offset
         if len(self.scores) < SCORES_KEPT:
             self.scores.append(fit.score)
@@ -190,8 +214,9 @@ class ICMethod(Method):
 
     def _band_residuals(self, fit):
         """``(jacobian, residual, weights)`` of a registration at the band's pixels, or None (a
-        re-acquired match, a band cut by the image border)."""
-        model = self.model
+        re-acquired match, a band cut by the image border); a trimmed fit's weights are 0 on the
+        tiles it dropped."""
+        model = self._trimmed[1] if fit is self._trimmed[0] else self.model
         if not isinstance(fit, FitResult) or fit.residual is None or len(fit.residual) != len(model.points):
             return None
         prior = 1.0 if model.weights is None else model.weights

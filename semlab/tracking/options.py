@@ -15,6 +15,7 @@ import inspect
 from dataclasses import dataclass, field
 
 from .consistency import MAX_INFLUENCE_PX
+from .trimming import MISFIT_P_VALUE
 from .uncertainty import SIGMA_LIMIT_PX
 
 __all__ = [
@@ -199,15 +200,19 @@ class JacobianOptions:
 @dataclass(frozen=True)
 class StageOptions:
     """``"ic"``'s Gauss–Newton stages: the smoothed coarse-to-fine ladder (0: none), the iterations
-    per stage (also ``"hb"``'s) and the robust loss."""
+    per stage (also ``"hb"``'s), the robust loss and the misfit tiles' trimming
+    (:mod:`semlab.tracking.trimming`)."""
 
     coarse_sigma: float = COARSE_SIGMA
     max_iterations: int = MAX_ITERATIONS
     huber: float | None = HUBER
+    misfit_p_value: float | None = MISFIT_P_VALUE
 
     def __post_init__(self):
         if self.huber is not None and not self.huber > 0:
             _refuse("huber", self.huber, "be > 0 or None")
+        if self.misfit_p_value is not None and not 0 < self.misfit_p_value < 1:
+            _refuse("misfit_p_value", self.misfit_p_value, "be in (0, 1) or None")
         if not _is_count(self.max_iterations, 1):
             _refuse("max_iterations", self.max_iterations, "be a positive integer")
         _normalise(self, coarse_sigma=float(self.coarse_sigma), max_iterations=int(self.max_iterations))

@@ -106,6 +106,12 @@ class Tracker:
         Gauss–Newton iterations per frame (``"ic"``, ``"hb"``).
     huber : float or None
         ``"ic"``: Huber threshold in robust standard deviations (None: plain least squares).
+    misfit_p_value : float or None
+        ``"ic"``: a 4-px tile of the band whose residuals are this improbable under the noise
+        (their χ²'s p-value) and more than a fifth of the object's contrast is not explained by the
+        template — a particle over the apex, an occluder's rim, debris in the band, each inside
+        Huber's linear range pixel by pixel — and the frame is fitted again without it, worst tile
+        first, at most three (:mod:`semlab.tracking.trimming`). None: off.
     template_frames : int
         ``"ic"`` averages the template over this many well-registered frames (1: frame 0 only).
     consistency_cut : float or None
