@@ -21,6 +21,7 @@ from skimage.restoration import denoise_nl_means
 from ..subpixel import MAD_TO_SD, NoiseModel, five_point_gradients, gauss_newton_setup, whiten_lines
 from ..template import ContourTemplate
 from .options import BandOptions, TrackerOptions
+from .uncertainty import band_tiles
 
 __all__ = [
     "DEFAULT_BAND_PX",
@@ -177,21 +178,21 @@ def background_texture(patch, region, noise: NoiseModel, min_distance: float = T
     return float(np.sqrt(max(excess, 0.0) / max(noise_var, 1e-12)))
 
 
-def background_sectors(xs, ys, inside, tile: int, width: int) -> np.ndarray | None:
+def background_sectors(xs, ys, inside, tile: int) -> np.ndarray | None:
     """Background band pixels grouped in ``tile``-px tiles, each with its own level.
 
     The background next to the object is not part of it: where the object moves to, the
     substrate around it is another one, brighter or darker at the scale of a few px (texture,
     shading). Fitted with the template's background, such a local change of level biases the
     edge by a fraction of its width; each tile's own level absorbs it. Object pixels get -1: no
-    local level. None when the option is off (``tile=0``). ``width`` is the ROI's.
+    local level. None when the option is off (``tile=0``).
     """
     if tile <= 0:
         return None
-    key = (ys // tile) * (width // tile + 1) + xs // tile
-    _, labels = np.unique(key[~inside], return_inverse=True)
     sector = np.full(len(xs), -1, np.intp)
-    sector[~inside] = labels
+    outside = ~np.asarray(inside, bool)
+    if outside.any():
+        sector[outside] = band_tiles(np.stack([xs[outside], ys[outside]], axis=1), tile)
     return sector
 
 
@@ -422,7 +423,7 @@ def build_band_model(template, contour: ContourTemplate, band, noise: NoiseModel
     fine, smoothed = _setups(fine, ladder, weights, inside, options)
     return BandModel(
         points=points, bbox=bbox, values=values, inside=inside,
-        sector=background_sectors(xs, ys, inside, options.band.background_tile, band.shape[1]),
+        sector=background_sectors(xs, ys, inside, options.band.background_tile),
         weights=weights,
         # Noise variance of the (whitened, averaged) template at the band pixels.
         template_variance=(1.0 - rho ** 2) * noise.variance(values) / n_averaged,
