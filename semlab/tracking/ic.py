@@ -107,14 +107,16 @@ class ICMethod(Method):
         p_value = self.options.stages.misfit_p_value
         if p_value is None or not isinstance(fit, FitResult):
             return fit, None
+        models = []  # (keep, model) of each refit
 
         def refit(keep, last):
-            return register(arr, self.model.reweighted(keep, self.options), Start(last.shift, last.gain, last.offset),
-                            self.roi, self.options, at=at, robust_start=False)
+            models.append((keep, self.model.reweighted(keep, self.options)))
+            return register(arr, models[-1][1], Start(last.shift, last.gain, last.offset), self.roi, self.options,
+                            at=at, robust_start=False)
 
         trimmed, keep = trim_misfit_tiles(fit, refit, self.tiles, self.model.weights, p_value,
                                           floor=MIN_MISFIT_CONTRAST * abs(fit.gain) * self.contrast)
-        return trimmed, (None if keep is None else self.model.reweighted(keep, self.options))
+        return trimmed, next((model for kept, model in models if kept is keep), None)
 
     # ---- the loss threshold
     def threshold(self) -> float:

@@ -23,7 +23,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
-from scipy.stats import chi2
+from scipy.special import chdtrc
 
 __all__ = ["MAX_DROPPED_FRACTION", "MAX_DROPPED_TILES", "MIN_MISFIT_CONTRAST", "MISFIT_P_VALUE", "tile_p_values",
            "tile_rms", "trim_misfit_tiles", "typical_tile_variance"]
@@ -69,7 +69,7 @@ def typical_tile_variance(residual, prior, labels) -> float:
     return float(np.median(total[full] / dof[full])) if full.any() else float("nan")
 
 
-def tile_p_values(residual, prior, labels, noise_variance: float) -> np.ndarray:
+def tile_p_values(residual, prior, labels, noise_variance: float, only=None) -> np.ndarray:
     """Per tile, the probability under the noise of a χ² as large as its residuals'.
 
     Parameters
@@ -82,6 +82,8 @@ def tile_p_values(residual, prior, labels, noise_variance: float) -> np.ndarray:
         Each pixel's tile (``0 .. n-1``).
     noise_variance : float
         The residuals' variance at prior 1 (:func:`typical_tile_variance`).
+    only : (n,) ndarray of bool, optional
+        The tiles to judge (the others get 1): the χ² tail is the costly part.
 
     Returns
     -------
@@ -95,7 +97,10 @@ def tile_p_values(residual, prior, labels, noise_variance: float) -> np.ndarray:
     dof = np.bincount(labels, weights=live.astype(float), minlength=n)
     statistic = np.bincount(labels, weights=np.where(live, np.asarray(residual, float) ** 2 * prior, 0.0),
                             minlength=n) / noise_variance
-    return np.where(dof > 0, chi2.sf(statistic, np.maximum(dof, 1)), 1.0)
+    judged = dof > 0 if only is None else (dof > 0) & only
+    p = np.ones(n)
+    p[judged] = chdtrc(dof[judged], statistic[judged])  # the χ² survival function, as a ufunc
+    return p
 
 
 def trim_misfit_tiles(fit, refit: Callable, labels, prior, p_value: float = MISFIT_P_VALUE, floor: float = 0.0):
@@ -128,16 +133,19 @@ def trim_misfit_tiles(fit, refit: Callable, labels, prior, p_value: float = MISF
     for _ in range(MAX_DROPPED_TILES):
         if not fit.converged or fit.residual is None or len(fit.residual) != len(labels):
             break
-        kept = np.ones(len(labels), bool) if keep is None else keep
-        variance = typical_tile_variance(fit.residual, prior * kept, labels)
+        live = prior if keep is None else prior * keep
+        # The floor first: where no tile passes it, the χ² is not needed.
+        above = tile_rms(fit.residual, live, labels) > floor
+        if not above.any():
+            break
+        variance = typical_tile_variance(fit.residual, live, labels)
         if not np.isfinite(variance) or variance <= 0:
             break
-        p = tile_p_values(fit.residual, prior * kept, labels, variance)
-        p[tile_rms(fit.residual, prior * kept, labels) <= floor] = 1.0
+        p = tile_p_values(fit.residual, live, labels, variance, only=above)
         worst = int(np.argmin(p))
         if p[worst] >= p_value:
             break
-        candidate = kept & (labels != worst)
+        candidate = (labels != worst) if keep is None else keep & (labels != worst)
         if 1.0 - candidate.mean() > MAX_DROPPED_FRACTION:
             break
         try:
