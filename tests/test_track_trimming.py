@@ -16,6 +16,7 @@ from semlab.tracking.trimming import (
     MISFIT_P_VALUE,
     tile_p_values,
     tile_rms,
+    tile_sums,
     trim_misfit_tiles,
 )
 from semlab.tracking.uncertainty import band_tiles
@@ -33,7 +34,7 @@ def test_tile_p_values_are_uniform_under_the_noise():
     points, labels = _tiles()
     rng = np.random.default_rng(0)
     prior = rng.uniform(0.3, 1.0, len(points))  # inverse variances (relative)
-    p = np.concatenate([tile_p_values(rng.normal(0, 2.0, len(points)) / np.sqrt(prior), prior, labels, 4.0)
+    p = np.concatenate([tile_p_values(tile_sums(rng.normal(0, 2.0, len(points)) / np.sqrt(prior), prior, labels), 4.0)
                         for _ in range(20)])
     assert kstest(p, "uniform").pvalue > 1e-3
     assert np.mean(p < MISFIT_P_VALUE) < 5 * MISFIT_P_VALUE + 3 / len(p)
@@ -45,10 +46,10 @@ def test_a_tile_off_by_two_noise_sd_is_improbable_and_dropped_pixels_do_not_coun
     residual = rng.normal(0, 1.0, len(points))
     tile = labels == labels[len(points) // 2]
     residual[tile] += 2.0  # a patch each pixel of which is inside Huber's linear range (2 sd)
-    p = tile_p_values(residual, np.ones(len(points)), labels, 1.0)
+    p = tile_p_values(tile_sums(residual, np.ones(len(points)), labels), 1.0)
     assert p[labels[tile][0]] < MISFIT_P_VALUE / 10 and np.median(p) > 0.2
     prior = np.where(tile, 0.0, 1.0)
-    assert tile_p_values(residual, prior, labels, 1.0)[labels[tile][0]] == 1.0
+    assert tile_p_values(tile_sums(residual, prior, labels), 1.0)[labels[tile][0]] == 1.0
 
 
 class _Fit:
@@ -95,7 +96,7 @@ def test_a_misfit_below_the_floor_is_kept():
     design = np.ones((len(points), 1))
     data = rng.normal(0, 0.01, len(points))
     data[labels == 7] += 0.05
-    rms = tile_rms(data - data.mean(), np.ones(len(data)), labels)
+    rms = tile_rms(tile_sums(data - data.mean(), np.ones(len(data)), labels))
     assert rms[7] == pytest.approx(0.05, abs=0.01) and np.median(rms) == pytest.approx(0.01, rel=0.2)
     fit0 = _Fit(design, data, np.ones(len(data), bool))
     assert trim_misfit_tiles(fit0, lambda keep, last: _Fit(design, data, keep), labels, None)[1] is not None

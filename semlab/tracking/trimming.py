@@ -21,12 +21,13 @@ the reported sigma says so.
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import NamedTuple
 
 import numpy as np
 from scipy.special import chdtrc
 
-__all__ = ["MAX_DROPPED_FRACTION", "MAX_DROPPED_TILES", "MIN_MISFIT_CONTRAST", "MISFIT_P_VALUE", "tile_p_values",
-           "tile_rms", "trim_misfit_tiles", "typical_tile_variance"]
+__all__ = ["MAX_DROPPED_FRACTION", "MAX_DROPPED_TILES", "MIN_MISFIT_CONTRAST", "MISFIT_P_VALUE", "TileSums",
+           "tile_p_values", "tile_rms", "tile_sums", "trim_misfit_tiles", "typical_tile_variance"]
 
 #: A tile whose residuals' χ² has a p-value below this is a misfit (with ~100 tiles in a band, a
 #: frame of pure noise loses a tile about once in 100 frames). On a moving probe many frames lose one
@@ -49,37 +50,45 @@ MIN_TILE_PIXELS = 8
 MIN_MISFIT_CONTRAST = 0.2
 
 
-def tile_rms(residual, prior, labels) -> np.ndarray:
-    """Per tile, the RMS of the residuals at its live pixels (``prior > 0``; 0 for a tile without any)."""
-    live = np.asarray(prior, float) > 0
+class TileSums(NamedTuple):
+    """Per tile of the band: its live pixels (``prior > 0``), and their residuals' squares summed plain and
+    weighted by the prior (inverse noise variance)."""
+
+    dof: np.ndarray
+    squares: np.ndarray
+    weighted: np.ndarray
+
+
+def tile_sums(residual, prior, labels) -> TileSums:
+    """:class:`TileSums` of the residuals at the band's pixels (``labels``: each pixel's tile, ``0 .. n-1``)."""
+    prior = np.asarray(prior, float)
+    live = prior > 0
     n = int(labels.max()) + 1
-    count = np.bincount(labels, weights=live.astype(float), minlength=n)
-    total = np.bincount(labels, weights=np.where(live, np.asarray(residual, float) ** 2, 0.0), minlength=n)
-    return np.sqrt(total / np.maximum(count, 1))
+    squares = np.where(live, np.asarray(residual, float) ** 2, 0.0)
+    return TileSums(np.bincount(labels, weights=live.astype(float), minlength=n),
+                    np.bincount(labels, weights=squares, minlength=n),
+                    np.bincount(labels, weights=squares * prior, minlength=n))
 
 
-def typical_tile_variance(residual, prior, labels) -> float:
+def tile_rms(sums: TileSums) -> np.ndarray:
+    """Per tile, the RMS of the residuals at its live pixels (0 for a tile without any)."""
+    return np.sqrt(sums.squares / np.maximum(sums.dof, 1))
+
+
+def typical_tile_variance(sums: TileSums) -> float:
     """The median over the band's tiles of their mean weighted squared residual: the scale a tile is
     judged against (robust to the few misfit tiles, and to a misfit the whole band shares)."""
-    live = np.asarray(prior, float) > 0
-    n = int(labels.max()) + 1
-    dof = np.bincount(labels, weights=live.astype(float), minlength=n)
-    total = np.bincount(labels, weights=np.where(live, np.asarray(residual, float) ** 2 * prior, 0.0), minlength=n)
-    full = dof >= MIN_TILE_PIXELS
-    return float(np.median(total[full] / dof[full])) if full.any() else float("nan")
+    full = sums.dof >= MIN_TILE_PIXELS
+    return float(np.median(sums.weighted[full] / sums.dof[full])) if full.any() else float("nan")
 
 
-def tile_p_values(residual, prior, labels, noise_variance: float, only=None) -> np.ndarray:
+def tile_p_values(sums: TileSums, noise_variance: float, only=None) -> np.ndarray:
     """Per tile, the probability under the noise of a χ² as large as its residuals'.
 
     Parameters
     ----------
-    residual : (K,) ndarray
-        The fit's residuals at the band's pixels.
-    prior : (K,) ndarray
-        Their inverse noise variances (relative; 0: a pixel already dropped).
-    labels : (K,) ndarray of int
-        Each pixel's tile (``0 .. n-1``).
+    sums : TileSums
+        The residuals' sums per tile (:func:`tile_sums`).
     noise_variance : float
         The residuals' variance at prior 1 (:func:`typical_tile_variance`).
     only : (n,) ndarray of bool, optional
@@ -91,15 +100,10 @@ def tile_p_values(residual, prior, labels, noise_variance: float, only=None) -> 
         ``P(χ²_k > Σ prior·r² / noise_variance)`` with ``k`` the tile's live pixels; 1 for a tile
         without any.
     """
-    prior = np.asarray(prior, float)
-    live = prior > 0
-    n = int(labels.max()) + 1
-    dof = np.bincount(labels, weights=live.astype(float), minlength=n)
-    statistic = np.bincount(labels, weights=np.where(live, np.asarray(residual, float) ** 2 * prior, 0.0),
-                            minlength=n) / noise_variance
+    dof = sums.dof
     judged = dof > 0 if only is None else (dof > 0) & only
-    p = np.ones(n)
-    p[judged] = chdtrc(dof[judged], statistic[judged])  # the χ² survival function, as a ufunc
+    p = np.ones(len(dof))
+    p[judged] = chdtrc(dof[judged], sums.weighted[judged] / noise_variance)  # the χ² survival function, as a ufunc
     return p
 
 
@@ -133,15 +137,15 @@ def trim_misfit_tiles(fit, refit: Callable, labels, prior, p_value: float = MISF
     for _ in range(MAX_DROPPED_TILES):
         if not fit.converged or fit.residual is None or len(fit.residual) != len(labels):
             break
-        live = prior if keep is None else prior * keep
+        sums = tile_sums(fit.residual, prior if keep is None else prior * keep, labels)
         # The floor first: where no tile passes it, the χ² is not needed.
-        above = tile_rms(fit.residual, live, labels) > floor
+        above = tile_rms(sums) > floor
         if not above.any():
             break
-        variance = typical_tile_variance(fit.residual, live, labels)
+        variance = typical_tile_variance(sums)
         if not np.isfinite(variance) or variance <= 0:
             break
-        p = tile_p_values(fit.residual, live, labels, variance, only=above)
+        p = tile_p_values(sums, variance, only=above)
         worst = int(np.argmin(p))
         if p[worst] >= p_value:
             break
