@@ -37,6 +37,7 @@ __all__ = [
     "contour_band",
     "contour_core",
     "inner_mask",
+    "region_contrast",
     "registration_band",
 ]
 
@@ -295,10 +296,16 @@ class BandModel:
                                    smoothed=tuple(dataclasses.replace(level, setup=None) for level in self.smoothed))
 
 
+def region_contrast(values, inside, default: float) -> float:
+    """``|mean(object) − mean(background)|`` of the band's ``values``; ``default`` when one side is empty."""
+    if not (inside.any() and not inside.all()):
+        return default
+    return abs(float(values[inside].mean() - values[~inside].mean()))
+
+
 def _jacobian_sigma(values, inside, noise: NoiseModel, n_averaged: int, options: TrackerOptions) -> float:
     """The Jacobian's smoothing: grows with the template's noise relative to its contrast."""
-    contrast = abs(float(values[inside].mean() - values[~inside].mean())) if (
-        inside.any() and not inside.all()) else 1.0
+    contrast = region_contrast(values, inside, default=1.0)
     noise_sd = float(np.sqrt(np.mean(noise.variance(values)) / n_averaged))
     jac = options.jacobian
     return float(np.clip(JACOBIAN_SIGMA_PER_NOISE * noise_sd / max(contrast, 1e-6), jac.jacobian_sigma,

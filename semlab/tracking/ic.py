@@ -16,7 +16,7 @@ import numpy as np
 
 from ..template import identify_contour_template
 from .averaging import TemplateAverager, consistency_weights, store_frame
-from .band import MIN_BAND_PIXELS, build_band_model, registration_band
+from .band import MIN_BAND_PIXELS, build_band_model, region_contrast, registration_band
 from .consistency import band_quadrants, quadrant_influence
 from .method import Method, Motion, Setup, Verdict
 from .registration import FitResult, Start, register
@@ -87,9 +87,8 @@ class ICMethod(Method):
         self.coarse = coarse_template(self.template, self._coarse_mask, factor)
         self.quadrants = band_quadrants(self.model.points)
         self.tiles = band_tiles(self.model.points)
-        fine, inside = self.model.fine.values, self.model.inside
         #: The object's contrast in the (whitened) template the fits' residuals are measured against.
-        self.contrast = abs(float(fine[inside].mean() - fine[~inside].mean())) if 0 < inside.sum() < len(inside) else 0.0
+        self.contrast = region_contrast(self.model.fine.values, self.model.inside, default=0.0)
         #: The band's template gradients (K, 2), the Jacobian up to the fit's gain.
         self.gradients = np.stack([self.model.fine.gx, self.model.fine.gy], axis=1)
 
