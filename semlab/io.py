@@ -20,14 +20,8 @@ Conversions (documented once, applied everywhere)
 
 Pixel size
 ----------
-Read from vendor TIFF metadata through :mod:`tifffile`:
-
-* FEI / Thermo Fisher (tags 34680/34682, ``TiffFile.fei_metadata``): ``[Scan] PixelWidth`` in metres;
-  then ``[EScan]``/``[IScan] PixelWidth``; then the horizontal field width (``[Scan] HorFieldsize`` or
-  ``[EBeam]``/``[IBeam]``/``[Beam] HFW``) divided by ``[Image] ResolutionX`` (or the image width).
-* Zeiss (``CZ_SEM`` tag 34118, ``TiffFile.sem_metadata``): ``ap_image_pixel_size`` (or
-  ``ap_pixel_size``) with its unit; then the field width ``ap_width`` divided by the image width.
-* ImageJ-calibrated TIFFs (``unit`` nm/um/micron with ``XResolution``) as a last resort.
+Read from vendor TIFF metadata (FEI / Thermo Fisher, Zeiss, ImageJ calibration) by
+:mod:`semlab.pixelsize`.
 
 An explicit ``pixel_size_nm=`` overrides the metadata. PNG, JPEG and video files carry no pixel size;
 then :attr:`FrameSequence.pixel_size_nm` is ``None`` and :attr:`FrameSequence.pixel_size_source` says so.
@@ -53,6 +47,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from .pixelsize import tiff_pixel_size
 
 __all__ = [
     "IMAGE_SUFFIXES",
@@ -324,114 +320,6 @@ def _normalise_dtype(img: np.ndarray) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------------------------
-# pixel size from metadata
-
-
-def _num(v) -> float | None:
-    try:
-        x = float(v)
-    except (TypeError, ValueError):
-        return None
-    return x if math.isfinite(x) and x > 0 else None
-
-
-_UNIT_TO_NM = {"pm": 1e-3, "nm": 1.0, "um": 1e3, "mm": 1e6, "m": 1e9, "cm": 1e7}
-
-
-def _unit_scale(unit: str) -> float | None:
-    u = unit.strip().lower().replace("µ", "u").replace("μ", "u").replace("micron", "um")
-    if u.endswith("um") or (len(u) >= 2 and u.endswith("m") and not u[-2].isascii()):
-        return 1e3  # micro sign, possibly mis-decoded (e.g. 'Âµm')
-    return _UNIT_TO_NM.get(u)
-
-
-def _zeiss_length_nm(entry) -> float | None:
-    """A CZ_SEM entry ``(label, value, unit)`` or ``(label, 'value unit')`` → nm."""
-    if not isinstance(entry, tuple) or len(entry) < 2:
-        return None
-    value = entry[1]
-    unit = entry[2] if len(entry) > 2 else None
-    if unit is None:
-        m = re.fullmatch(r"\s*([-+0-9.eE]+)\s*(\S+)\s*", str(value))
-        if not m:
-            return None
-        value, unit = m.group(1), m.group(2)
-    v = _num(value)
-    scale = _unit_scale(str(unit))
-    if v is None or scale is None:
-        return None
-    return v * scale
-
-
-def _fei_pixel_size(md: dict, width_px: int) -> tuple[float | None, str]:
-    for section in ("Scan", "EScan", "IScan"):
-        v = _num((md.get(section) or {}).get("PixelWidth"))
-        if v is not None:
-            return v * 1e9, f"FEI metadata [{section}] PixelWidth"
-    hfw = None
-    where = ""
-    for section, key in (
-        ("Scan", "HorFieldsize"),
-        ("EBeam", "HFW"),
-        ("IBeam", "HFW"),
-        ("Beam", "HFW"),
-    ):
-        hfw = _num((md.get(section) or {}).get(key))
-        if hfw is not None:
-            where = f"[{section}] {key}"
-            break
-    if hfw is not None:
-        res = _num((md.get("Image") or {}).get("ResolutionX"))
-        if res is not None:
-            return hfw * 1e9 / res, f"FEI metadata {where} / [Image] ResolutionX"
-        return hfw * 1e9 / width_px, f"FEI metadata {where} / image width"
-    return None, "FEI metadata without PixelWidth or HFW"
-
-
-def _zeiss_pixel_size(md: dict, width_px: int) -> tuple[float | None, str]:
-    for key in ("ap_image_pixel_size", "ap_pixel_size"):
-        v = _zeiss_length_nm(md.get(key))
-        if v is not None and v > 0:
-            return v, f"Zeiss CZ_SEM metadata {key}"
-    w = _zeiss_length_nm(md.get("ap_width"))
-    if w is not None and w > 0:
-        return w / width_px, "Zeiss CZ_SEM metadata ap_width / image width"
-    return None, "Zeiss CZ_SEM metadata without pixel size or field width"
-
-
-def _imagej_pixel_size(tif, page) -> tuple[float | None, str]:
-    ij = tif.imagej_metadata or {}
-    unit = ij.get("unit")
-    if not unit:
-        return None, ""
-    scale = _unit_scale(str(unit).replace("\\u00B5", "u"))
-    tag = page.tags.get("XResolution")
-    if scale is None or tag is None:
-        return None, ""
-    num, den = tag.value
-    px_per_unit = _num(num / den if den else None)
-    if px_per_unit is None:
-        return None, ""
-    return scale / px_per_unit, "ImageJ calibration (unit, XResolution)"
-
-
-def _tiff_pixel_size(tif, page, width_px: int) -> tuple[float | None, str, dict]:
-    if tif.is_fei:
-        md = tif.fei_metadata or {}
-        ps, src = _fei_pixel_size(md, width_px)
-        return ps, src, {"vendor": "FEI/Thermo Fisher", "fei_metadata": md}
-    if tif.is_sem:
-        md = tif.sem_metadata or {}
-        ps, src = _zeiss_pixel_size(md, width_px)
-        return ps, src, {"vendor": "Zeiss", "sem_metadata": md}
-    if tif.is_imagej:
-        ps, src = _imagej_pixel_size(tif, page)
-        if ps is not None:
-            return ps, src, {"vendor": "ImageJ"}
-    return None, "no pixel size in the TIFF metadata", {}
-
-
-# ----------------------------------------------------------------------------------------------
 # readers
 
 
@@ -506,7 +394,7 @@ def _read_tiff(p: Path) -> tuple[np.ndarray, dict]:
             if len(parts) > 1:
                 data = np.concatenate(parts)
             width = data.shape[2]
-            ps, src, vendor = _tiff_pixel_size(tif, tif.pages.first, width)
+            ps, src, vendor = tiff_pixel_size(tif, tif.pages.first, width)
             bad = [m for m in messages if any(h in m.lower() for h in _CORRUPT_HINTS)]
             if bad:
                 raise FrameReadError(p, f"truncated or corrupt TIFF ({bad[0].strip()})")
@@ -730,44 +618,10 @@ def read_frames(
     override = None if pixel_size_nm is None else _check_pixel_size(pixel_size_nm)
     given = expand_inputs(inputs, order="given")
     files = natural_order(given) if order == "natural" else given
-    it: Iterable[Path] = files
-    if progress and len(files) > 1:
-        from tqdm.auto import tqdm
-
-        it = tqdm(files, desc="reading", unit="file")
-    stacks: list[np.ndarray] = []
-    paths: list[Path] = []
-    pages: list[int] = []
-    formats: dict[str, str] = {}
-    per_file_ps: dict[str, float | None] = {}
-    first_info: dict | None = None
-    first_path: Path | None = None
-    for p in it:
-        data, info = _read_file(p)
-        if first_info is None:
-            first_info, first_path = info, p
-            shape0, dtype0 = data.shape[1:], data.dtype
-        else:
-            if data.shape[1:] != shape0:
-                raise FrameReadError(
-                    p,
-                    f"frame size {data.shape[2]}x{data.shape[1]} px differs from "
-                    f"{shape0[1]}x{shape0[0]} px of the first frame ({first_path.name})",
-                )
-            if data.dtype != dtype0:
-                raise FrameReadError(
-                    p,
-                    f"pixel type {data.dtype} differs from {dtype0} of the first frame ({first_path.name})",
-                )
-        stacks.append(data)
-        paths.extend([p] * data.shape[0])
-        pages.extend(range(data.shape[0]))
-        formats[str(p)] = info["format"]
-        per_file_ps[str(p)] = info["pixel_size_nm"]
-    assert first_info is not None and first_path is not None
-    frames = stacks[0] if len(stacks) == 1 else np.concatenate(stacks, axis=0)
-
+    stack = _read_stack(files, progress)
+    first_info, first_path = stack.infos[0], files[0]
     meta_ps = first_info["pixel_size_nm"]
+    per_file_ps = {str(p): info["pixel_size_nm"] for p, info in zip(files, stack.infos)}
     known = [v for v in per_file_ps.values() if v is not None]
     if meta_ps is not None and any(abs(v - meta_ps) > 1e-3 * meta_ps for v in known):
         warnings.warn(
@@ -777,9 +631,9 @@ def read_frames(
             stacklevel=2,
         )
     meta: dict[str, Any] = {
-        "files": [str(p) for p in dict.fromkeys(paths)],
-        "page": pages,
-        "format": formats,
+        "files": [str(p) for p in dict.fromkeys(stack.paths)],
+        "page": stack.pages,
+        "format": {str(p): info["format"] for p, info in zip(files, stack.infos)},
         "pixel_size_nm_per_file": per_file_ps,
         "metadata_pixel_size_nm": meta_ps,
         "metadata_pixel_size_source": first_info["pixel_size_source"],
@@ -790,18 +644,67 @@ def read_frames(
     for key in ("vendor", "fei_metadata", "sem_metadata", "fps", "converted"):
         if key in first_info:
             meta[key] = first_info[key]
-    if override is not None:
-        ps, src = override, "explicit pixel_size_nm"
-    elif meta_ps is not None:
-        ps, src = meta_ps, f"{first_info['pixel_size_source']} ({first_path.name})"
-    else:
-        ps, src = (
-            None,
-            f"unknown: {first_info['pixel_size_source']} ({first_path.name}); {PIXEL_SIZE_HINT}",
-        )
+    ps, src = _chosen_pixel_size(override, first_info, first_path)
     return FrameSequence(
-        frames=frames, paths=paths, pixel_size_nm=ps, pixel_size_source=src, meta=meta
+        frames=stack.frames, paths=stack.paths, pixel_size_nm=ps, pixel_size_source=src, meta=meta
     )
+
+
+@dataclass
+class _Stack:
+    """The frames of every file, the file and page of each frame, and each file's reader info."""
+
+    frames: np.ndarray
+    paths: list[Path]
+    pages: list[int]
+    infos: list[dict]
+
+
+def _read_stack(files: list[Path], progress: bool) -> _Stack:
+    """Read ``files`` in order into one stack; FrameReadError when a file's frames differ in size or
+    pixel type from the first file's."""
+    it: Iterable[Path] = files
+    if progress and len(files) > 1:
+        from tqdm.auto import tqdm
+
+        it = tqdm(files, desc="reading", unit="file")
+    stacks: list[np.ndarray] = []
+    paths: list[Path] = []
+    pages: list[int] = []
+    infos: list[dict] = []
+    for p in it:
+        data, info = _read_file(p)
+        if stacks:
+            _check_like_first(p, data, stacks[0], files[0])
+        stacks.append(data)
+        paths.extend([p] * data.shape[0])
+        pages.extend(range(data.shape[0]))
+        infos.append(info)
+    frames = stacks[0] if len(stacks) == 1 else np.concatenate(stacks, axis=0)
+    return _Stack(frames, paths, pages, infos)
+
+
+def _check_like_first(p: Path, data: np.ndarray, first: np.ndarray, first_path: Path) -> None:
+    if data.shape[1:] != first.shape[1:]:
+        raise FrameReadError(
+            p,
+            f"frame size {data.shape[2]}x{data.shape[1]} px differs from "
+            f"{first.shape[2]}x{first.shape[1]} px of the first frame ({first_path.name})",
+        )
+    if data.dtype != first.dtype:
+        raise FrameReadError(
+            p,
+            f"pixel type {data.dtype} differs from {first.dtype} of the first frame ({first_path.name})",
+        )
+
+
+def _chosen_pixel_size(override: float | None, first_info: dict, first_path: Path) -> tuple[float | None, str]:
+    """The sequence's pixel size and its source: the explicit one, else the first file's metadata."""
+    if override is not None:
+        return override, "explicit pixel_size_nm"
+    if first_info["pixel_size_nm"] is not None:
+        return first_info["pixel_size_nm"], f"{first_info['pixel_size_source']} ({first_path.name})"
+    return None, f"unknown: {first_info['pixel_size_source']} ({first_path.name}); {PIXEL_SIZE_HINT}"
 
 
 # ----------------------------------------------------------------------------------------------
