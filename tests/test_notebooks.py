@@ -421,7 +421,9 @@ def _claims_08(r):
     # "On the thin needle at low dose it flags 91 % of the frames (82 %) and is silent on 8 % (15 %). On the
     # semi-real needle semlab is level with the best peer, at 24x the bound where ECC is at 24x (41x against NCC's
     # 39x on seed 0), flagging 23 % of its frames (46 %); it is still silent on 23 % (46 %)"
-    assert round(r["semlab_flagged"]["thin_low_dose"], 2) == (0.91 if full else 0.82)
+    # Within a frame (of 39 a seed): whether a frame at the 0.35-px sigma limit on this low-dose needle is flagged
+    # follows the CPU's float32 rounding (OpenCV's SIMD path): 31 or 32 frames of seed 0 on two machines.
+    assert abs(r["semlab_flagged"]["thin_low_dose"] - (0.91 if full else 0.82)) <= 0.03
     assert round(silent["thin_low_dose"], 2) == (0.08 if full else 0.15)
     assert round(r["semlab_flagged"]["semi_real"], 2) == (0.23 if full else 0.46)
     assert round(silent["semi_real"], 2) == (0.23 if full else 0.46)
