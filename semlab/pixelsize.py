@@ -16,8 +16,6 @@ import re
 __all__ = ["tiff_pixel_size"]
 
 
-
-
 def _num(v) -> float | None:
     try:
         x = float(v)
