@@ -5,23 +5,16 @@ Installed as the console script ``semlab`` (``pyproject.toml``) and runnable as 
 
 One module per concern: ``_common`` (exit codes, errors, option parsers, reading the input, atomic
 writes), ``parser`` (:func:`build_parser`), ``info``, ``track`` and ``evaluate`` (the commands).
-Every name of the former single module ``semlab/cli.py`` is still importable from here.
 """
 
 from __future__ import annotations
 
-# The modules and names semlab.cli had at module level (tests patch ``semlab.cli.os.replace``).
-import argparse  # noqa: F401
-import hashlib  # noqa: F401
-import json  # noqa: F401
-import math  # noqa: F401
+# ``os`` as a module attribute: the tests patch ``semlab.cli.os.replace`` (the same module object the
+# atomic write in ``_common`` calls).
 import os
 import sys
-import time  # noqa: F401
-from datetime import UTC, datetime  # noqa: F401
-from pathlib import Path  # noqa: F401
 
-from semlab.cli._common import (  # noqa: F401
+from semlab.cli._common import (
     COMMAND_HELP,
     EXIT_CODES,
     EXIT_INPUT,
@@ -33,59 +26,24 @@ from semlab.cli._common import (  # noqa: F401
     EXIT_SCHEDULER,
     EXIT_TRACKING,
     EXIT_USAGE,
-    _check_output,
-    _cli_words,
-    _click_arg,
     _CLIError,
-    _fmt_nm,
-    _fmt_ps,
-    _numbers,
-    _param_arg,
-    _Parser,
     _ParserExit,
-    _pixel_size_arg,
-    _read,
-    _roi_arg,
-    _sha256,
-    _size_arg,
-    _tmp_name,
-    _version,
-    _write_atomically,
 )
-from semlab.cli.evaluate import (  # noqa: F401
-    EVALUATE_DESCRIPTION,
-    EVALUATE_EXAMPLES,
-    _add_evaluate_parser,
-    _cmd_evaluate,
-    _dask_versions,
-    _save_corpus_figure,
-    _seeds_arg,
-)
-from semlab.cli.info import INFO_DESCRIPTION, _cmd_info  # noqa: F401
-from semlab.cli.parser import _tracker_methods, build_parser  # noqa: F401
-from semlab.cli.track import (  # noqa: F401
-    TRACK_DESCRIPTION,
-    TRACK_EXAMPLES,
-    _accepts,
-    _check_params,
-    _check_roi,
-    _cmd_track,
-    _note_reordering,
-    _print_track_summary,
-    _run_tracker,
-    _track_record,
-    _track_roi,
-    _track_table,
-    _type_name,
-)
-from semlab.environment import describe as describe_environment  # noqa: F401
+from semlab.cli.evaluate import _cmd_evaluate
+from semlab.cli.info import _cmd_info
+from semlab.cli.parser import build_parser
+from semlab.cli.track import _cmd_track
 
 __all__ = [
+    "COMMAND_HELP",
+    "EXIT_CODES",
     "EXIT_INPUT",
     "EXIT_INTERNAL",
+    "EXIT_INTERRUPTED",
     "EXIT_OK",
     "EXIT_OUTPUT",
     "EXIT_ROI",
+    "EXIT_SCHEDULER",
     "EXIT_TRACKING",
     "EXIT_USAGE",
     "build_parser",
