@@ -94,6 +94,8 @@ CONTRACT = {
     "max_influence": 0.5,
     # issue 14: the band's tiles the template does not explain are dropped (semlab.tracking.trimming)
     "misfit_p_value": 1e-4,
+    # issue 14: particles touching the probe in frame 0 are cut off its region (semlab.tracking.attached)
+    "cut_attached": True,
 }
 
 

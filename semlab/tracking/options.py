@@ -153,6 +153,9 @@ class BandOptions:
     band_px: int | None = None
     inner_px: int = INNER_PX
     background_tile: int = BACKGROUND_TILE_PX
+    #: ``"ic"``: particles touching the probe in frame 0 are cut off the contour region and the band
+    #: keeps clear of them (:mod:`semlab.tracking.attached`).
+    cut_attached: bool = True
 
     def __post_init__(self):
         if self.band_px is not None and not _is_count(self.band_px, 1):
@@ -160,7 +163,8 @@ class BandOptions:
         if not _is_count(self.background_tile, 0):
             _refuse("background_tile", self.background_tile, "be a non-negative integer")
         _normalise(self, band_px=None if self.band_px is None else int(self.band_px),
-                   inner_px=int(self.inner_px), background_tile=int(self.background_tile))
+                   inner_px=int(self.inner_px), background_tile=int(self.background_tile),
+                   cut_attached=bool(self.cut_attached))
 
 
 @dataclass(frozen=True)

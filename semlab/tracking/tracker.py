@@ -11,6 +11,7 @@ import numpy as np
 from ..roi import as_gray_float, check_roi, roi_centre
 from ..subpixel import NoiseModel, estimate_noise
 from ..template import ContourTemplate, identify_contour_template
+from .attached import MAX_OUTLINE_NOISE, clear_band, without_attached
 from .band import MIN_BAND_PIXELS, background_texture, band_widths, registration_band
 from .consistency import inconsistent
 from .frames import GrayScale, as_frame
@@ -207,7 +208,11 @@ class Tracker:
         _check_contrast(patch, contour, noise, roi, self.options.template.sigma)
         self.texture = background_texture(patch, contour.region, noise)
         widths = self.band_widths()
-        band = registration_band(contour, widths)
+        attached = None
+        if self.method == "ic" and self.options.band.cut_attached and _outline_resolved(
+                patch, contour, noise, self.options.template.sigma):
+            contour, attached = without_attached(contour, raw)
+        band = clear_band(registration_band(contour, widths), attached)
         if band.sum() < MIN_BAND_PIXELS:
             raise ValueError(f"the contour template in ROI {roi} leaves {int(band.sum())} band pixels away from "
                              f"the ROI border, fewer than {MIN_BAND_PIXELS}: enlarge the ROI or move it onto the tip")
@@ -402,6 +407,16 @@ def smoothed_noise_sd(noise: NoiseModel, level: float, sigma_px: float) -> float
     along_line = float(kernel @ (noise.rho ** lags) @ kernel)
     across = float(kernel @ kernel)
     return sd * float(np.sqrt(along_line * across))
+
+
+def _outline_resolved(patch, contour: ContourTemplate, noise: NoiseModel, sigma_px: float) -> bool:
+    """Whether the smoothed noise is at most :data:`~semlab.tracking.attached.MAX_OUTLINE_NOISE` of the
+    object's contrast: the region's bumps are the scene's, not the noise's."""
+    region = contour.region
+    if not (region.any() and not region.all()):
+        return False
+    contrast = abs(float(patch[region].mean() - patch[~region].mean()))
+    return smoothed_noise_sd(noise, float(patch.mean()), sigma_px) <= MAX_OUTLINE_NOISE * contrast
 
 
 def _check_contrast(patch, contour: ContourTemplate, noise: NoiseModel, roi, sigma_px: float) -> None:

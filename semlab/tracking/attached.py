@@ -1,0 +1,172 @@
+"""Particles that touch the probe in frame 0: cut off the contour region and left out of the band.
+
+Otsu's threshold (paper, Fig. 2) takes whatever is bright in the ROI of frame 0. A particle touching
+the probe's edge there joins the object region as a bump, and the band is drawn around it. But the
+particle stays where it is (or drifts) when the probe moves: every later frame is then registered
+partly on a feature that does not move with the probe, and along the shaft, where only the apex
+tells the position, a bump of a few px holds the template back by a pixel or more while the fit
+reports a good match (the corpus's clutter family: static particles touching the edge in frame 0).
+
+A bump is what a morphological opening of the region's main part with a disc of
+:data:`OPENING_RADIUS_PX` leaves out (a particle smaller than the disc is shaved off, a larger one
+survives the erosion apart from the main part): a compact piece (:data:`MIN_ROUNDNESS` of its enclosing circle), of a particle's size
+(:data:`MIN_PIECE_PX`-:data:`MAX_PIECE_PX`), away from the apex (the region's point farthest from
+where it enters the ROI, which the opening also shaves: a wedge's tip is a compact piece too) and
+from the ROI's border, and dimmer than the probe (:data:`MAX_RELATIVE_LEVEL` of the probe's contrast
+over the background: another material or a rounded particle, where a gripper's jaw or a blunt
+tip's corner, which the opening also takes off, is the probe's own material). Such a piece is cut
+off the region (:func:`without_attached`) and the band keeps :data:`BAND_CLEARANCE_PX` away from
+it. Only where the outline is resolved above the noise (:data:`MAX_OUTLINE_NOISE` of the contrast):
+at low dose the noise itself makes bumps of the region's outline.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import cv2
+import numpy as np
+
+from ..template import ContourTemplate
+
+__all__ = ["BAND_CLEARANCE_PX", "MAX_OUTLINE_NOISE", "attached_pieces", "clear_band", "without_attached"]
+
+#: Radius (px) of the opening's disc: particles of a few px touching the edge come off, the shaft
+#: stays (the corpus's particles are 1-5 px in radius, a probe's shaft is wider than 10 px).
+OPENING_RADIUS_PX = 4
+#: A piece between these areas (px²) is particle-sized: smaller is the outline's own roughness,
+#: larger is a part of the probe (a jaw, a shoulder).
+MIN_PIECE_PX = 10
+MAX_PIECE_PX = 160
+#: A piece fills at least this fraction of its enclosing circle (a disc fills 1, a sliver far less).
+MIN_ROUNDNESS = 0.45
+#: A piece at most this many px from the apex is the apex, shaved by the opening.
+APEX_CLEARANCE_PX = 3
+#: A piece whose median level (the ROI smoothed by 1 px) reaches this fraction of the probe's
+#: contrast over the background is the probe's own material; particles touching the probe on the
+#: development scenes are at 0.45-0.87 of it, gripper jaws' tips at 0.9-1.2.
+MAX_RELATIVE_LEVEL = 0.9
+#: The band keeps this many px away from a cut piece: the particle's blurred rim reaches that far.
+BAND_CLEARANCE_PX = 4
+#: The cut only where the smoothed noise is at most this fraction of the object's contrast (0.02-0.045
+#: on the development scenes at standard dose, 0.08-0.17 at low dose, where noise bumps the outline).
+MAX_OUTLINE_NOISE = 0.06
+#: The probe's and the background's levels: this far (px) inside the region, and outside it.
+LEVEL_MARGIN_PX = 3
+LEVEL_SMOOTHING_PX = 1.0
+
+
+def _disc(radius: int) -> np.ndarray:
+    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
+
+
+def _apex(region: np.ndarray) -> tuple[int, int] | None:
+    """The region's pixel ``(x, y)`` farthest from where it touches the ROI's border (None: it does not)."""
+    edge = np.zeros(region.shape, bool)
+    edge[[0, -1], :] = edge[:, [0, -1]] = True
+    by, bx = np.nonzero(region & edge)
+    if bx.size == 0:
+        return None
+    to_base = np.ones(region.shape, np.uint8)
+    to_base[by, bx] = 0
+    distance = cv2.distanceTransform(to_base, cv2.DIST_L2, 5)
+    distance[~region] = -1.0
+    y, x = np.unravel_index(int(np.argmax(distance)), distance.shape)
+    return int(x), int(y)
+
+
+def _body(region: np.ndarray) -> np.ndarray:
+    """The opening of the region's main part: its largest component after the erosion, dilated back.
+    A particle wider than the disc survives the erosion as a component of its own, and so is not body."""
+    disc = _disc(OPENING_RADIUS_PX)
+    eroded = cv2.erode(region.astype(np.uint8), disc)
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(eroded, connectivity=8)
+    if n < 2:
+        return np.zeros(region.shape, bool)
+    main = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+    return cv2.dilate((labels == main).astype(np.uint8), disc).astype(bool) & region
+
+
+def _levels(region: np.ndarray, smoothed: np.ndarray) -> tuple[float, float] | None:
+    """Median levels of the probe (inside the region) and of the background (outside it)."""
+    inner = cv2.erode(region.astype(np.uint8), _disc(LEVEL_MARGIN_PX)).astype(bool)
+    outer = ~cv2.dilate(region.astype(np.uint8), _disc(LEVEL_MARGIN_PX + 1)).astype(bool)
+    if not inner.any() or not outer.any():
+        return None
+    return float(np.median(smoothed[inner])), float(np.median(smoothed[outer]))
+
+
+def attached_pieces(region, patch) -> np.ndarray:
+    """The pixels of the particles attached to ``region`` (see the module docstring).
+
+    Parameters
+    ----------
+    region : (h, w) array_like of bool
+        The contour template's region (:attr:`semlab.template.ContourTemplate.region`).
+    patch : (h, w) array_like
+        The ROI of frame 0 the region was found in.
+
+    Returns
+    -------
+    (h, w) ndarray of bool
+        The pieces to cut (all False when there are none).
+    """
+    region = np.asarray(region, bool)
+    cut = np.zeros(region.shape, bool)
+    smoothed = cv2.GaussianBlur(np.asarray(patch, np.float32), (0, 0), LEVEL_SMOOTHING_PX)
+    levels = _levels(region, smoothed)
+    if levels is None or levels[0] == levels[1]:
+        return cut
+    probe, background = levels
+    shaved = (region & ~_body(region)).astype(np.uint8)
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(shaved, connectivity=4)
+    apex = _apex(region)
+    h, w = region.shape
+    for i in range(1, n):
+        x, y, bw, bh, area = (int(v) for v in stats[i])
+        if not MIN_PIECE_PX <= area <= MAX_PIECE_PX or x == 0 or y == 0 or x + bw >= w or y + bh >= h:
+            continue
+        piece = labels == i
+        if apex is not None:
+            to_piece = cv2.distanceTransform((~piece).astype(np.uint8), cv2.DIST_L2, 3)
+            if to_piece[apex[1], apex[0]] <= APEX_CLEARANCE_PX:
+                continue
+        points = np.column_stack(np.nonzero(piece)[::-1]).astype(np.float32)
+        _, radius = cv2.minEnclosingCircle(points)
+        if area < MIN_ROUNDNESS * np.pi * max(radius, 0.5) ** 2:
+            continue
+        if (float(np.median(smoothed[piece])) - background) / (probe - background) >= MAX_RELATIVE_LEVEL:
+            continue
+        cut |= piece
+    return cut
+
+
+def without_attached(contour: ContourTemplate, patch) -> tuple[ContourTemplate, np.ndarray | None]:
+    """``(contour, pieces)``: the contour template with its attached particles cut off the region
+    (the largest external contour of what remains), and their pixels; ``(contour, None)`` unchanged
+    when there are none."""
+    pieces = attached_pieces(contour.region, patch)
+    if not pieces.any():
+        return contour, None
+    # One px more than the piece: the neck that joined it goes too.
+    neck = cv2.dilate(pieces.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+    remaining = (contour.region & ~neck).astype(np.uint8)
+    found, _ = cv2.findContours(remaining, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    if not found:
+        return contour, None
+    best = max(found, key=cv2.contourArea)
+    mask = np.zeros(remaining.shape, np.uint8)
+    cv2.drawContours(mask, [best], 0, 1, thickness=1)
+    region = np.zeros(remaining.shape, np.uint8)
+    cv2.drawContours(region, [best], 0, 1, thickness=cv2.FILLED)
+    cut = dataclasses.replace(contour, points=best.reshape(-1, 2), mask=mask.astype(bool),
+                              region=region.astype(bool), area=float(cv2.contourArea(best)))
+    return cut, pieces
+
+
+def clear_band(band, pieces) -> np.ndarray:
+    """``band`` without the pixels within :data:`BAND_CLEARANCE_PX` of ``pieces`` (None: unchanged)."""
+    if pieces is None:
+        return band
+    near = cv2.dilate(np.asarray(pieces, np.uint8), _disc(BAND_CLEARANCE_PX)).astype(bool)
+    return band & ~near

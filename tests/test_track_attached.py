@@ -1,0 +1,108 @@
+"""Particles touching the probe in frame 0 are cut off its contour region (semlab.tracking.attached, issue 14)."""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+import pytest
+from scipy.special import erf
+from test_track_uncertainty import CENTRE, ROI, wedge_frame
+
+from semlab.template import identify_contour_template
+from semlab.tracking import Tracker
+from semlab.tracking.attached import BAND_CLEARANCE_PX, attached_pieces, without_attached
+
+#: The wedge's upper flank at x = 100 is at y = 95 (half-angle 14°, tip at x = 120): a disc of radius 4
+#: centred 4.5 px above it touches it.
+PARTICLE_AT = (100.0, 90.5)
+PARTICLE_RADIUS = 4.0
+BLUR = 1.2
+
+
+def _disc(at, radius, shape):
+    yy, xx = np.mgrid[:shape[0], :shape[1]]
+    return 0.5 * (1 - erf((np.hypot(xx - at[0], yy - at[1]) - radius) / (math.sqrt(2) * BLUR)))
+
+
+def _with_particle(dx=0.0, *, level=0.6, at=PARTICLE_AT, seed=None):
+    """The analytic wedge moved by ``dx``, a static particle of ``level`` times its contrast touching its
+    upper flank; Poisson noise (variance = level, as in an SE image) when ``seed`` is given."""
+    img = wedge_frame(dx, 0.0).astype(np.float64)
+    img = np.maximum(img, 50.0 + 130.0 * level * _disc(at, PARTICLE_RADIUS, img.shape))
+    if seed is not None:
+        img = np.random.default_rng(seed).poisson(img)
+    return img.astype(np.float32)
+
+
+def _roi(img):
+    x0, y0, w, h = ROI
+    return np.clip(np.rint(img[y0:y0 + h, x0:x0 + w]), 0, 255).astype(np.uint8)
+
+
+def _outside_the_wedge(region, dx=0.0):
+    """The region's pixels more than 1 px outside the clean wedge's own region."""
+    wedge = identify_contour_template(_roi(wedge_frame(dx, 0.0))).region
+    return region & ~cv2.dilate(wedge.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+
+
+def test_a_particle_touching_the_flank_is_cut_and_the_apex_stays():
+    patch = _roi(_with_particle())
+    paper = identify_contour_template(patch)
+    pieces = attached_pieces(paper.region, patch)
+    ys, xs = np.nonzero(pieces)
+    assert xs.size and math.dist((xs.mean() + ROI[0], ys.mean() + ROI[1]), PARTICLE_AT) < PARTICLE_RADIUS
+    contour, _ = without_attached(paper, patch)
+    assert _outside_the_wedge(paper.region).sum() >= 10 and _outside_the_wedge(contour.region).sum() <= 2
+    # the front of the wedge (its last 10 px, where the apex tells x) is as the paper found it
+    front = slice(110 - ROI[0], None)
+    assert np.array_equal(contour.region[:, front], paper.region[:, front])
+
+
+@pytest.mark.parametrize("dx", [0.0, 0.37, 2.5])
+def test_a_clean_wedge_has_no_piece(dx):
+    patch = _roi(wedge_frame(dx, 0.0))
+    assert not attached_pieces(identify_contour_template(patch).region, patch).any()
+
+
+def test_the_tracker_cuts_it_and_keeps_the_band_clear():
+    img = _with_particle(seed=0)
+    cut, kept = Tracker(), Tracker(cut_attached=False)
+    cut.init(img, ROI)
+    kept.init(img, ROI)
+    assert _outside_the_wedge(kept.contour.region).sum() >= 10 and _outside_the_wedge(cut.contour.region).sum() <= 2
+    # the band keeps BAND_CLEARANCE_PX from what was cut (the piece and its 1-px neck)
+    ys, xs = np.nonzero(kept.contour.region & ~cut.contour.region)
+    by, bx = np.nonzero(cut.band)
+    assert np.hypot(bx[:, None] - xs[None], by[:, None] - ys[None]).min() >= BAND_CLEARANCE_PX - 1
+
+
+def test_a_static_particle_no_longer_holds_the_probe_back():
+    # The wedge moves 0.6 px a frame along its axis, the particle stays. Kept in the template, it pulls the
+    # fit back along the shaft (where only the apex tells x) as the wedge leaves it; cut, the track stays
+    # within the noise: Poisson noise of ~7 gray levels on a contrast of 130 puts a single frame's x within
+    # about 0.15 px (1 sigma), so 0.6 px is 4 sigma.
+    def worst(**kw):
+        frames = [_with_particle(0.6 * k, seed=k) for k in range(16)]
+        t = Tracker(**kw)
+        t.init(frames[0], ROI)
+        errors = []
+        for k, frame in enumerate(frames[1:], 1):
+            r = t.update(frame)
+            assert r.ok
+            errors.append(abs(r.x - CENTRE[0] - 0.6 * k))
+        return max(errors)
+
+    cut, kept = worst(), worst(cut_attached=False)
+    assert cut < 0.6 < kept
+
+
+def test_noise_bumps_are_not_cut_at_low_dose():
+    # Where the smoothed noise is a sizeable fraction of the contrast the outline's bumps are the noise's:
+    # the region stays the paper's.
+    img = wedge_frame(0.0, 0.0, noise=40.0, seed=3)
+    cut, kept = Tracker(), Tracker(cut_attached=False)
+    cut.init(img, ROI)
+    kept.init(img, ROI)
+    assert np.array_equal(cut.contour.region, kept.contour.region)
