@@ -14,10 +14,10 @@ from semlab.template import identify_contour_template
 from semlab.tracking import Tracker
 from semlab.tracking.attached import BAND_CLEARANCE_PX, attached_pieces, without_attached
 
-#: The wedge's upper flank at x = 100 is at y = 95 (half-angle 14°, tip at x = 120): a disc of radius 4
-#: centred 4.5 px above it touches it.
-PARTICLE_AT = (100.0, 90.5)
-PARTICLE_RADIUS = 4.0
+#: The wedge's upper flank at x = 100 is at y = 95 (half-angle 14°, tip at x = 120): a disc of radius 5
+#: centred 5.5 px above it touches it.
+PARTICLE_AT = (100.0, 89.5)
+PARTICLE_RADIUS = 5.0
 BLUR = 1.2
 
 
@@ -105,4 +105,19 @@ def test_noise_bumps_are_not_cut_at_low_dose():
     cut, kept = Tracker(), Tracker(cut_attached=False)
     cut.init(img, ROI)
     kept.init(img, ROI)
+    assert np.array_equal(cut.contour.region, kept.contour.region)
+
+
+def test_the_real_needle_s_corner_is_not_a_particle():
+    # The AutoLiftout needle's corner in frame 0 of data/real-sem/contact_brightness_seq is a 10-px piece
+    # the opening shaves off: below MIN_PIECE_PX, so the needle keeps it (cut, the needle was lost from
+    # the contact on, frame 5).
+    import semlab
+    from semlab.roi import roi_from_click
+
+    frames = list(semlab.load_sample("contact_brightness_seq").frames)
+    roi = roi_from_click(frames[0], (480, 270), size=200)
+    cut, kept = Tracker(), Tracker(cut_attached=False)
+    cut.init(frames[0], roi)
+    kept.init(frames[0], roi)
     assert np.array_equal(cut.contour.region, kept.contour.region)

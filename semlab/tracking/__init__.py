@@ -14,7 +14,8 @@ Methods
     line and weighted by the shot-noise variance (both estimated from the first frame); a
     Jacobian smoothed in proportion to the template's noise; and a template averaged over the
     first registered frames with frame 0 re-registered against it as the origin (a one-frame
-    template doubles the variance of every estimate). When Gauss–Newton fails both from the
+    template doubles the variance of every estimate). Particles touching the probe in frame 0
+    are cut off its contour region first (they do not move with it). When Gauss–Newton fails both from the
     prediction and from the coarse search (an edge's contrast vanishing at contact with a
     sample, a brightness jump), a masked normalised correlation of the object's neighbourhood
     over the whole search window — blind to gain and offset — re-acquires it if its peak stands
@@ -39,6 +40,8 @@ Modules
     :class:`TrackResult`, one frame's answer.
 ``frames``
     Frame validation, float crops, iteration over a sequence.
+``attached``
+    Particles touching the probe in frame 0: cut off the contour region, the band kept clear of them.
 ``band``
     The registration band around the contour and the band model built on it, offline.
 ``registration``

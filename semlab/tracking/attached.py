@@ -34,9 +34,10 @@ __all__ = ["BAND_CLEARANCE_PX", "MAX_OUTLINE_NOISE", "attached_pieces", "clear_b
 #: Radius (px) of the opening's disc: particles of a few px touching the edge come off, the shaft
 #: stays (the corpus's particles are 1-5 px in radius, a probe's shaft is wider than 10 px).
 OPENING_RADIUS_PX = 4
-#: A piece between these areas (px²) is particle-sized: smaller is the outline's own roughness,
-#: larger is a part of the probe (a jaw, a shoulder).
-MIN_PIECE_PX = 10
+#: A piece between these areas (px²) is particle-sized: smaller is the outline's own roughness or a
+#: corner the opening shaves (the real needle's corner in ``data/real-sem/contact_brightness_seq``:
+#: 10 px), larger is a part of the probe (a jaw, a shoulder).
+MIN_PIECE_PX = 15
 MAX_PIECE_PX = 160
 #: A piece fills at least this fraction of its enclosing circle (a disc fills 1, a sliver far less).
 MIN_ROUNDNESS = 0.45
