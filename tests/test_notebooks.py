@@ -215,8 +215,9 @@ def _claims_02(r):
 
 def _claims_03(r):
     full = r["n_cycles"] == 5          # fast mode runs 2 of the paper's five cycles
-    # "semlab's default follows the A->B->A moves of 200 px with an RMSE of 0.18 px ..., never more than 0.6 px off"
-    assert round(r["ic_rmse_px"], 2) in (0.18, 0.17) and r["ic_max_error_px"] < 0.6
+    # "semlab's default follows the A->B->A moves of 200 px with an RMSE of 0.18-0.19 px ..., never more than 0.6 px
+    # off" (0.17-0.18 in fast mode; 0.186 in a full run on an AVX-512 machine)
+    assert round(r["ic_rmse_px"], 2) in (0.17, 0.18, 0.19) and r["ic_max_error_px"] < 0.6
     # "The paper's contour tracker ... is 18 px RMSE with a maximum of 112 px over five cycles (2.0 px and 16.9 px
     # over fast mode's two)"
     assert (r["contour_rmse_px"], r["contour_max_error_px"]) == ((18.0, 112.2) if full else (2.0, 16.9))
@@ -266,11 +267,12 @@ def _claims_05(r):
     # below the paper's 0.46 px; the PID-only steps end within 0.4 px"
     assert r["ff_true_final_error_max_px"] < 0.3 and r["ff_true_final_std_max_px"] < 0.2
     assert r["pid_true_final_error_max_px"] < 0.4
-    # "In fast mode every feed-forward step is within ±0.5 px by the truth by the sixth frame; in the full run five of
-    # the six are, and the sixth is not"
-    assert r["ff_true_steps_within_0p5px_by_frame_6"] == (5 if full else r["n_steps_per_mode"])
-    # "... and the truth enters the band only much later": after the sixth frame
-    if full:
+    # "In fast mode every feed-forward step is within ±0.5 px by the truth by the sixth frame; in the full run all six
+    # on one machine, five of the six on another, where the sixth is not"
+    within = r["ff_true_steps_within_0p5px_by_frame_6"]
+    assert within in ((5, 6) if full else (r["n_steps_per_mode"],))
+    # "... and the truth enters the band only much later": after the sixth frame, where one is not within
+    if within < r["n_steps_per_mode"]:
         assert r["ff_true_frames_to_0p5px_max"] > 6
     # "The tracker reads the end of every feed-forward step within 0.05 px of the target, and its reading and the
     # truth differ by less than 0.35 px"
@@ -330,8 +332,9 @@ def _claims_06(r):
     assert r["semlab_all_flagged_worst_noise"] and r["trackers_refused_worst_noise"] == 0
     assert (r["semlab_too_uncertain_worst_noise"], r["semlab_frames_worst_noise"]) == ((58, 59) if full else (9, 9))
     assert round(r["free_sigma_x_worst_noise"], 1) == (1.3 if full else 0.9) and round(r["crb_x_worst_noise"], 2) == 0.39
-    assert r["free_rmse_worst_noise"] == (4.1 if full else 9.5)
-    assert r["free_silent_1px_worst_noise"] == (31 if full else 9)
+    # (full run: 4.1 px and 31 frames on one machine, 4.2 and 38 on an AVX-512 one: unconstrained fits at 3 pA)
+    assert r["free_rmse_worst_noise"] in ((4.1, 4.2) if full else (9.5,))
+    assert (31 <= r["free_silent_1px_worst_noise"] <= 38) if full else r["free_silent_1px_worst_noise"] == 9
     # "OpenCV's ECC tracks the same frames to 0.87 px (1.0 px in fast mode); the paper's contour tracker ... now
     # starts and is about 12 px RMSE, losing 36-44 % of its frames; the SSD baseline finds no match in any frame"
     assert round(r["ecc_rmse_worst_noise_px"], 2 if full else 1) == (0.87 if full else 1.0)
@@ -431,12 +434,12 @@ def _claims_08(r):
     assert r["best_peer"]["semi_real"] == ("ecc" if full else "ncc")
     # "semlab reports no frame more than 1 px off as ok on the still probe, the 200-px moves, wander, jumps, low
     # dose, gray-level charging and shapes in both runs; issue 14's <= 0.5 % holds on 7 of the 11 families (9 on
-    # seed 0). It does not on clutter and substrates in the full run (23.5 % and 5 %, from seed 1), ..."
+    # seed 0). It does not on clutter and substrates in the full run (24.5 % and 3 %, from seed 1), ..."
     assert all(silent[f] == 0 for f in ("still", "moves_200px", "wander", "jumps", "low_dose", "gray_charging",
                                          "shapes"))
     assert sum(v <= 0.005 for v in silent.values()) == (7 if full else 9)
     if full:
-        assert (round(silent["clutter"], 3), round(silent["substrates"], 2)) == (0.235, 0.05)
+        assert (round(silent["clutter"], 3), round(silent["substrates"], 2)) == (0.245, 0.03)
     # "coverage95 ... is 0.86-1 on every family but the semi-real needle and the thin needle at low dose (and clutter
     # in the full run), where it is 0.6 or less and semlab is silent on 8-46 % of its frames"
     cov = r["coverage95"]
