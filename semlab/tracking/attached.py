@@ -9,8 +9,8 @@ reports a good match (the corpus's clutter family: static particles touching the
 
 A bump is what a morphological opening of the region's main part with a disc of
 :data:`OPENING_RADIUS_PX` leaves out (a particle smaller than the disc is shaved off, a larger one
-survives the erosion apart from the main part): a compact piece (:data:`MIN_ROUNDNESS` of its enclosing circle), of a particle's size
-(:data:`MIN_PIECE_PX`-:data:`MAX_PIECE_PX`), away from the apex (the region's point farthest from
+survives the erosion apart from the main part): a compact piece (:data:`MIN_ROUNDNESS` of its
+enclosing circle), of a particle's size (:data:`MIN_PIECE_PX`-:data:`MAX_PIECE_PX`), away from the apex (the region's point farthest from
 where it enters the ROI, which the opening also shaves: a wedge's tip is a compact piece too) and
 from the ROI's border, and dimmer than the probe (:data:`MAX_RELATIVE_LEVEL` of the probe's contrast
 over the background: another material or a rounded particle, where a gripper's jaw or a blunt
