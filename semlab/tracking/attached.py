@@ -10,9 +10,9 @@ reports a good match (the corpus's clutter family: static particles touching the
 A bump is what a morphological opening of the region's main part with a disc of
 :data:`OPENING_RADIUS_PX` leaves out (a particle smaller than the disc is shaved off, a larger one
 survives the erosion apart from the main part): a compact piece (:data:`MIN_ROUNDNESS` of its
-enclosing circle), of a particle's size (:data:`MIN_PIECE_PX`-:data:`MAX_PIECE_PX`), away from the apex (the region's point farthest from
-where it enters the ROI, which the opening also shaves: a wedge's tip is a compact piece too) and
-from the ROI's border, and dimmer than the probe (:data:`MAX_RELATIVE_LEVEL` of the probe's contrast
+enclosing circle), of a particle's size (:data:`MIN_PIECE_PX`-:data:`MAX_PIECE_PX`), away from the
+apex (the region's point farthest from where it enters the ROI, which the opening also shaves: a
+wedge's tip is a compact piece too) and from the ROI's border, and dimmer than the probe (:data:`MAX_RELATIVE_LEVEL` of the probe's contrast
 over the background: another material or a rounded particle, where a gripper's jaw or a blunt
 tip's corner, which the opening also takes off, is the probe's own material). Such a piece is cut
 off the region (:func:`without_attached`) and the band keeps :data:`BAND_CLEARANCE_PX` away from
@@ -27,7 +27,7 @@ import dataclasses
 import cv2
 import numpy as np
 
-from ..template import ContourTemplate
+from ..template import ContourTemplate, identify_contour_template
 
 __all__ = ["BAND_CLEARANCE_PX", "MAX_OUTLINE_NOISE", "attached_pieces", "clear_band", "without_attached"]
 
@@ -151,17 +151,13 @@ def without_attached(contour: ContourTemplate, patch) -> tuple[ContourTemplate, 
         return contour, None
     # One px more than the piece: the neck that joined it goes too.
     neck = cv2.dilate(pieces.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
-    remaining = (contour.region & ~neck).astype(np.uint8)
-    found, _ = cv2.findContours(remaining, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
-    if not found:
+    remaining = np.where(contour.region & ~neck, 255, 0).astype(np.uint8)
+    try:  # the largest external contour of what remains, as frame 0's was found (no smoothing, no morphology)
+        found = identify_contour_template(remaining, sigma=0, threshold=127, morph_kernel=0)
+    except ValueError:
         return contour, None
-    best = max(found, key=cv2.contourArea)
-    mask = np.zeros(remaining.shape, np.uint8)
-    cv2.drawContours(mask, [best], 0, 1, thickness=1)
-    region = np.zeros(remaining.shape, np.uint8)
-    cv2.drawContours(region, [best], 0, 1, thickness=cv2.FILLED)
-    cut = dataclasses.replace(contour, points=best.reshape(-1, 2), mask=mask.astype(bool),
-                              region=region.astype(bool), area=float(cv2.contourArea(best)))
+    cut = dataclasses.replace(contour, points=found.points, mask=found.mask, region=found.region,
+                              hierarchy=found.hierarchy, contours=found.contours, area=found.area)
     return cut, pieces
 
 

@@ -205,12 +205,12 @@ class Tracker:
         to_8bit = (0.0, 1.0) if raw.dtype == np.uint8 else (
             float(patch.min()), 255.0 / max(float(patch.max() - patch.min()), 1e-12))
         noise = estimate_noise(patch)
-        _check_contrast(patch, contour, noise, roi, self.options.template.sigma)
+        contrast, smoothed_sd = _check_contrast(patch, contour, noise, roi, self.options.template.sigma)
         self.texture = background_texture(patch, contour.region, noise)
         widths = self.band_widths()
         attached = None
-        if self.method == "ic" and self.options.band.cut_attached and _outline_resolved(
-                patch, contour, noise, self.options.template.sigma):
+        # The cut only where the region's bumps are the scene's, not the noise's.
+        if self.method == "ic" and self.options.band.cut_attached and smoothed_sd <= MAX_OUTLINE_NOISE * contrast:
             contour, attached = without_attached(contour, raw)
         band = clear_band(registration_band(contour, widths), attached)
         if band.sum() < MIN_BAND_PIXELS:
@@ -409,24 +409,23 @@ def smoothed_noise_sd(noise: NoiseModel, level: float, sigma_px: float) -> float
     return sd * float(np.sqrt(along_line * across))
 
 
-def _outline_resolved(patch, contour: ContourTemplate, noise: NoiseModel, sigma_px: float) -> bool:
-    """Whether the smoothed noise is at most :data:`~semlab.tracking.attached.MAX_OUTLINE_NOISE` of the
-    object's contrast: the region's bumps are the scene's, not the noise's."""
+def _check_contrast(patch, contour: ContourTemplate, noise: NoiseModel, roi,
+                    sigma_px: float) -> tuple[float, float]:
+    """``(contrast, sd)``: the contour's object/background contrast and the noise of the smoothed image
+    in which it was found (``(0, inf)`` when the region is empty or the whole ROI).
+
+    Raises
+    ------
+    ValueError
+        The contrast is below :data:`MIN_CONTRAST_NOISE` noise standard deviations: noise, not a probe.
+    """
     region = contour.region
     if not (region.any() and not region.all()):
-        return False
+        return 0.0, float("inf")
     contrast = abs(float(patch[region].mean() - patch[~region].mean()))
-    return smoothed_noise_sd(noise, float(patch.mean()), sigma_px) <= MAX_OUTLINE_NOISE * contrast
-
-
-def _check_contrast(patch, contour: ContourTemplate, noise: NoiseModel, roi, sigma_px: float) -> None:
-    """ValueError when the contour encloses no more contrast than the noise of the smoothed image in
-    which it was found (:data:`MIN_CONTRAST_NOISE` standard deviations): noise, not a probe."""
-    region = contour.region
-    if region.any() and not region.all():
-        contrast = abs(float(patch[region].mean() - patch[~region].mean()))
-        sd = smoothed_noise_sd(noise, float(patch.mean()), sigma_px)
-        if contrast < MIN_CONTRAST_NOISE * sd:
-            raise ValueError(f"no object in the ROI {roi}: the contour encloses a contrast of {contrast:.3g} gray levels, "
-                             f"less than {MIN_CONTRAST_NOISE:g} times the noise of the smoothed ROI ({sd:.3g}); "
-                             "this is noise, not a probe")
+    sd = smoothed_noise_sd(noise, float(patch.mean()), sigma_px)
+    if contrast < MIN_CONTRAST_NOISE * sd:
+        raise ValueError(f"no object in the ROI {roi}: the contour encloses a contrast of {contrast:.3g} gray levels, "
+                         f"less than {MIN_CONTRAST_NOISE:g} times the noise of the smoothed ROI ({sd:.3g}); "
+                         "this is noise, not a probe")
+    return contrast, sd
