@@ -165,10 +165,6 @@ def _sha256(path: Path) -> str:
     return h.hexdigest()
 
 
-def _fmt_nm(v) -> str:
-    return "unknown" if v is None else f"{v:.4g} nm"
-
-
 def _fmt_ps(v, source: str) -> str:
     """'97.66 nm (from ...)' or 'unknown (reason)'."""
     if v is None:

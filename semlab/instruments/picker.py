@@ -6,7 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from semlab.widgets import OVERVIEW_CLASS, display_to_frame, overview_image
+from semlab.widgets import OVERVIEW_CLASS, overview_image
+from semlab.widgets._common import _overview_click
 
 __all__ = ["TargetPicker"]
 
@@ -67,14 +68,9 @@ class TargetPicker:
                               else f"target ({target[0]:.1f}, {target[1]:.1f}) px")
 
     def _on_event(self, event):
-        if event.get("event") != "click":
-            return
-        try:
-            xy = display_to_frame((event["relativeX"], event["relativeY"]),
-                                  (event["boundingRectWidth"], event["boundingRectHeight"]), self.frame.shape)
-        except (KeyError, TypeError, ValueError):
-            return  # a message without usable geometry (the image hidden): nothing to do
-        self.set_target(xy)
+        xy = _overview_click(event, self.frame.shape)
+        if xy is not None:  # not a click, or a message without usable geometry (the image hidden)
+            self.set_target(xy)
 
     def _repr_mimebundle_(self, **kwargs):
         return self.ui._repr_mimebundle_(**kwargs)

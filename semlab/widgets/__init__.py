@@ -20,10 +20,11 @@ interactive matplotlib backend. Display a widget by leaving it last in a cell or
 Modules
 -------
 ``_common``
-    What the widgets share: the layout and slider style, the off-screen figure, the CSS classes.
+    What the widgets share: the layout and slider style, the off-screen figure, the CSS classes; the
+    frame overview (:func:`overview_image`) and its click-to-frame coordinates (:func:`display_to_frame`),
+    which the template explorer, the servo panel and :class:`semlab.instruments.picker.TargetPicker` show.
 ``template_explorer``
-    :class:`TemplateExplorer`, :func:`explore_template`, :func:`render_template_figure`; the frame
-    overview (:func:`overview_image`) and its click-to-frame coordinates (:func:`display_to_frame`).
+    :class:`TemplateExplorer`, :func:`explore_template`, :func:`render_template_figure`.
 ``player``
     :class:`TrackingPlayer`, :func:`player_state`.
 ``servo_panel``
@@ -38,11 +39,12 @@ from ._common import OVERVIEW_CLASS as OVERVIEW_CLASS
 from ._common import READOUT_CLASS as READOUT_CLASS
 from ._common import SERVO_OVERVIEW_CLASS as SERVO_OVERVIEW_CLASS
 from ._common import THRESHOLD_CLASS as THRESHOLD_CLASS
+from ._common import display_to_frame, overview_image
 from .player import TrackingPlayer, player_state
 from .servo_panel import SERVO_RUNS_SHOWN as SERVO_RUNS_SHOWN
 from .servo_panel import SERVO_ZOOM_PX as SERVO_ZOOM_PX
 from .servo_panel import ServoPanel
-from .template_explorer import TemplateExplorer, display_to_frame, explore_template, overview_image
+from .template_explorer import TemplateExplorer, explore_template
 from .template_explorer import render_template_figure as render_template_figure
 
 __all__ = ["ServoPanel", "TemplateExplorer", "TrackingPlayer", "display_to_frame", "explore_template",

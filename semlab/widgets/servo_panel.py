@@ -8,8 +8,14 @@ import numpy as np
 
 from ..plots import figure_png, plot_step_response, show_frame
 from ..roi import clip_window
-from ._common import _SLIDER_STYLE, SERVO_OVERVIEW_CLASS, _layout, _png_figure
-from .template_explorer import display_to_frame, overview_image
+from ._common import (
+    _SLIDER_STYLE,
+    SERVO_OVERVIEW_CLASS,
+    _layout,
+    _overview_click,
+    _png_figure,
+    overview_image,
+)
 
 #: Runs overlaid in the servo panel's figures (older ones are kept in ``runs``/``moves``, not drawn).
 SERVO_RUNS_SHOWN = 6
@@ -240,6 +246,35 @@ class ServoPanel:
         self.error = str(err)
         self.readout.value = f"<b>refused</b>: {html.escape(self.error)}"
 
+    def _record(self, history, what, resp, metrics, draw, readout):
+        """Keep a finished run, redraw its figure and show its readout.
+
+        Parameters
+        ----------
+        history : list
+            ``runs`` or ``moves``; ``(label, resp, metrics)`` is appended to it.
+        what : str
+            What the run did, for its label (:meth:`_label` adds the controller and the gains).
+        resp : DataFrame
+            The run's response.
+        metrics : Series
+            Its metrics.
+        draw : callable
+            Redraws the figure that overlays ``history``.
+        readout : callable
+            ``readout(label, metrics)``: the readout's HTML.
+
+        Returns
+        -------
+        DataFrame
+            ``resp``.
+        """
+        label = self._label(what)
+        history.append((label, resp, metrics))
+        draw()
+        self.readout.value = readout(label, metrics)
+        return resp
+
     # -------------------------------------------------------------- the paper's step
     def run(self):
         """Run one step response with the current controls; return it (None if it raised)."""
@@ -255,11 +290,8 @@ class ServoPanel:
         self.response = resp
         self.metrics = step_metrics(resp, final_frames=_final_frames(resp))
         along = f" along {self.models[k].axis}" if len(self.models) > 1 else ""
-        label = self._label(f"{c['step_px'].value:+.0f} px{along}")
-        self.runs.append((label, resp, self.metrics))
-        self._draw()
-        self.readout.value = self._readout(label, self.metrics)
-        return resp
+        return self._record(self.runs, f"{c['step_px'].value:+.0f} px{along}", resp, self.metrics,
+                            self._draw, self._readout)
 
     # -------------------------------------------------------------- servo to a point
     def go_to(self, target_xy):
@@ -281,22 +313,14 @@ class ServoPanel:
             return None
         self.point_response = resp
         self.point_metrics = point_metrics(resp, final_frames=_final_frames(resp))
-        label = self._label(f"to ({float(target_xy[0]):.0f}, {float(target_xy[1]):.0f})")
-        self.moves.append((label, resp, self.point_metrics))
-        self._draw_points()
-        self.readout.value = self._point_readout(label, self.point_metrics)
-        return resp
+        return self._record(self.moves, f"to ({float(target_xy[0]):.0f}, {float(target_xy[1]):.0f})", resp,
+                            self.point_metrics, self._draw_points, self._point_readout)
 
     def _on_overview_event(self, event):
         """An ipyevents message from the overview: a click there is where the tip should go."""
-        if event.get("event") != "click":
-            return
-        try:
-            xy = display_to_frame((event["relativeX"], event["relativeY"]),
-                                  (event["boundingRectWidth"], event["boundingRectHeight"]), self.frame.shape)
-        except (KeyError, TypeError, ValueError):
-            return  # a message without usable geometry (e.g. the image was hidden): nothing to do
-        self.go_to(xy)
+        xy = _overview_click(event, self.frame.shape)
+        if xy is not None:  # not a click, or a message without usable geometry: nothing to do
+            self.go_to(xy)
 
     # -------------------------------------------------------------- state after a run
     def _follow(self, resp):

@@ -1,12 +1,13 @@
 """The template explorer: pick the ROI and tune the contour template and the Canny edges live
-(paper, Figs. 1-3); the frame overview and its click-to-frame coordinates, shared with the servo panel."""
+(paper, Figs. 1-3). The frame overview and its click-to-frame coordinates (:func:`overview_image`,
+:func:`display_to_frame`) live in ``_common``, shared with the servo panel and the target picker;
+they are importable from here as well."""
 
 from __future__ import annotations
 
 import html
 import time
 
-import cv2
 import numpy as np
 
 from ..edges import adaptive_canny_thresholds, canny_edges
@@ -22,7 +23,10 @@ from ._common import (
     READOUT_CLASS,
     THRESHOLD_CLASS,
     _layout,
+    _overview_click,
     _png_figure,
+    display_to_frame,  # noqa: F401 -- re-exported: it was defined here, and may be imported from here
+    overview_image,
 )
 
 
@@ -108,91 +112,6 @@ def render_template_figure(frame, r, *, pixel_size_nm=None, size=(14, 3.9), fram
     show_frame(binary, axes[2], contour=contour, contour_offset=(x, y), origin=(x, y), title="(d, e) threshold, morphology")
     show_edges(r["edges"], axes[3], origin=(x, y), title="adaptive Canny" if r["adaptive"] else "fixed Canny")
     return axes[0].figure
-
-
-def display_to_frame(display_xy, display_size, frame_shape) -> tuple[float, float]:
-    """Frame coordinates of a mouse position on a displayed image of the whole frame.
-
-    The image may be downscaled when it is encoded and scaled again by CSS: only its size *as displayed*
-    matters. The displayed image spans the frame from pixel edge to pixel edge (frame x from -0.5 to
-    ``cols - 0.5``), and a mouse position ``k`` (whole CSS px, as the browser reports it) stands for the
-    CSS pixel ``[k, k + 1)``, whose centre is taken; so at 1:1 display CSS pixel ``k`` is frame pixel ``k``.
-    x and y are scaled separately, so a stretched display converts correctly too.
-
-    Parameters
-    ----------
-    display_xy : (float, float)
-        Mouse position from the displayed image's top-left corner, CSS px: ipyevents' ``relativeX,
-        relativeY`` (or ``offsetX, offsetY`` for an image without border and padding).
-    display_size : (float, float)
-        Width and height of the image as displayed, CSS px: ipyevents' ``boundingRectWidth,
-        boundingRectHeight``.
-    frame_shape : (rows, cols)
-
-    Returns
-    -------
-    (x, y) : (float, float)
-        Frame px, clipped into ``[0, cols - 1] x [0, rows - 1]`` (a click on the image's last CSS pixel
-        may land half a frame pixel outside).
-
-    Raises
-    ------
-    ValueError
-        A display size that is not positive, or a position that is not finite.
-
-    Examples
-    --------
-    A 640x480 frame shown 320x240 px: CSS pixel (10, 0) covers frame pixels x 20 and 21, y 0 and 1.
-
-    >>> display_to_frame((10, 0), (320, 240), (480, 640))
-    (20.5, 0.5)
-    """
-    rows, cols = (int(v) for v in frame_shape[:2])
-    dx, dy = (float(v) for v in display_xy)
-    width, height = (float(v) for v in display_size)
-    if not (width > 0 and height > 0 and np.isfinite(width) and np.isfinite(height)):
-        raise ValueError(f"display size {display_size!r} must be positive (is the image hidden?)")
-    if not (np.isfinite(dx) and np.isfinite(dy)):
-        raise ValueError(f"display position {display_xy!r} is not finite")
-    x = (dx + 0.5) * cols / width - 0.5
-    y = (dy + 0.5) * rows / height - 0.5
-    return float(np.clip(x, 0, cols - 1)), float(np.clip(y, 0, rows - 1))
-
-
-def overview_image(frame, roi, click=None, *, max_width=440, quality=85) -> bytes:
-    """The whole frame as a JPEG, at most ``max_width`` px wide, with the ROI as a yellow box.
-
-    Drawn with OpenCV rather than matplotlib: no axes or margins, so the image's pixels map linearly onto
-    the frame (:func:`display_to_frame`), and it renders in a few milliseconds. JPEG, because a noisy SEM
-    frame makes a PNG ten times larger, and the image travels to the browser on every click.
-
-    Parameters
-    ----------
-    frame : (M, N) array_like
-    roi : (x, y, w, h)
-    click : (x, y), optional
-        Drawn as a small cyan cross, px.
-    max_width : int
-        The frame is downscaled (never upscaled) to this width.
-    quality : int
-        JPEG quality, 0-100.
-    """
-    gray = to_uint8(frame)
-    rows, cols = gray.shape
-    scale = min(1.0, max_width / cols)
-    size = (max(1, round(cols * scale)), max(1, round(rows * scale)))
-    small = cv2.resize(gray, size, interpolation=cv2.INTER_AREA) if scale < 1 else gray
-    rgb = cv2.cvtColor(small, cv2.COLOR_GRAY2BGR)
-    sx, sy = size[0] / cols, size[1] / rows
-    x, y, w, h = roi
-    # Frame px edges x - 0.5 .. x + w - 0.5 become display edges x*s .. (x + w)*s.
-    cv2.rectangle(rgb, (round(x * sx), round(y * sy)), (round((x + w) * sx) - 1, round((y + h) * sy) - 1),
-                  (0, 215, 255), 2)
-    if click is not None:
-        cx, cy = (round((float(v) + 0.5) * s - 0.5) for v, s in zip(click, (sx, sy), strict=True))
-        cv2.drawMarker(rgb, (cx, cy), (255, 255, 0), cv2.MARKER_CROSS, 9, 1)
-    _, jpeg = cv2.imencode(".jpg", rgb, [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
-    return jpeg.tobytes()
 
 
 class TemplateExplorer:
@@ -373,29 +292,34 @@ class TemplateExplorer:
 
     def _on_threshold(self, change):
         # Dragging the threshold means "manual threshold".
-        if self._syncing:
-            return
-        with self._sync():
-            self.controls["otsu"].value = False
-        self.update()
+        self._manual("otsu")
 
     def _on_canny(self, change):
+        # Dragging T_l, T_h means "manual Canny thresholds".
+        self._manual("adaptive")
+
+    def _manual(self, automatic: str) -> None:
+        """A slider moved by hand: untick the checkbox that made it automatic, then recompute.
+
+        Parameters
+        ----------
+        automatic : str
+            The control that lets the explorer choose the slider's value (``"otsu"``, ``"adaptive"``);
+            it is unticked without a recompute of its own. Nothing happens while the explorer itself
+            is setting the controls.
+        """
         if self._syncing:
             return
         with self._sync():
-            self.controls["adaptive"].value = False
+            self.controls[automatic].value = False
         self.update()
 
     def _on_overview_event(self, event):
         """An ipyevents message from the overview: a click there moves the click point and the ROI."""
-        if event.get("event") != "click":
-            return
-        try:
-            x, y = display_to_frame((event["relativeX"], event["relativeY"]),
-                                    (event["boundingRectWidth"], event["boundingRectHeight"]),
-                                    self.frame.shape)
-        except (KeyError, TypeError, ValueError):
-            return   # a message without usable geometry (e.g. the image was hidden): nothing to do
+        xy = _overview_click(event, self.frame.shape)
+        if xy is None:
+            return   # not a click, or a message without usable geometry: nothing to do
+        x, y = xy
         c = self.controls
         with self._sync():
             c["click_x"].value, c["click_y"].value = round(x), round(y)
