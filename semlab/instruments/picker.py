@@ -6,8 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from semlab.widgets import OVERVIEW_CLASS, overview_image
-from semlab.widgets._common import _overview_click
+from semlab.widgets import OVERVIEW_CLASS, overview_click, overview_image
 
 __all__ = ["TargetPicker"]
 
@@ -68,7 +67,7 @@ class TargetPicker:
                               else f"target ({target[0]:.1f}, {target[1]:.1f}) px")
 
     def _on_event(self, event):
-        xy = _overview_click(event, self.frame.shape)
+        xy = overview_click(event, self.frame.shape)
         if xy is not None:  # not a click, or a message without usable geometry (the image hidden)
             self.set_target(xy)
 

@@ -54,6 +54,7 @@ class ICMethod(Method):
     name = "ic"
     flags_uncertain = True
     widens_search = True
+    cuts_attached = True
 
     def start(self, setup: Setup) -> None:
         super().start(setup)

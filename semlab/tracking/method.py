@@ -125,6 +125,10 @@ class Method:
     #: Whether a frame the search window did not find it in is searched over the whole frame before
     #: it is lost (``"ic"``; the paper's methods search their window, as the paper has them).
     widens_search = False
+    #: Whether particles touching the object in frame 0 are cut off its contour region before the band
+    #: is drawn (``"ic"``, with ``cut_attached``: :mod:`semlab.tracking.attached`; the paper's methods
+    #: keep the paper's contour).
+    cuts_attached = False
 
     def __init__(self, options: TrackerOptions):
         self.options = options

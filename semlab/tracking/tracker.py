@@ -210,7 +210,8 @@ class Tracker:
         widths = self.band_widths()
         attached = None
         # The cut only where the region's bumps are the scene's, not the noise's.
-        if self.method == "ic" and self.options.band.cut_attached and smoothed_sd <= MAX_OUTLINE_NOISE * contrast:
+        if (METHOD_CLASSES[self.method].cuts_attached and self.options.band.cut_attached
+                and smoothed_sd <= MAX_OUTLINE_NOISE * contrast):
             contour, attached = without_attached(contour, raw)
         band = clear_band(registration_band(contour, widths), attached)
         if band.sum() < MIN_BAND_PIXELS:

@@ -39,7 +39,7 @@ from ._common import OVERVIEW_CLASS as OVERVIEW_CLASS
 from ._common import READOUT_CLASS as READOUT_CLASS
 from ._common import SERVO_OVERVIEW_CLASS as SERVO_OVERVIEW_CLASS
 from ._common import THRESHOLD_CLASS as THRESHOLD_CLASS
-from ._common import display_to_frame, overview_image
+from ._common import display_to_frame, overview_click, overview_image
 from .player import TrackingPlayer, player_state
 from .servo_panel import SERVO_RUNS_SHOWN as SERVO_RUNS_SHOWN
 from .servo_panel import SERVO_ZOOM_PX as SERVO_ZOOM_PX
@@ -48,4 +48,4 @@ from .template_explorer import TemplateExplorer, explore_template
 from .template_explorer import render_template_figure as render_template_figure
 
 __all__ = ["ServoPanel", "TemplateExplorer", "TrackingPlayer", "display_to_frame", "explore_template",
-           "overview_image", "player_state"]
+           "overview_click", "overview_image", "player_state"]

@@ -122,7 +122,7 @@ def overview_image(frame, roi, click=None, *, max_width=440, quality=85) -> byte
     return jpeg.tobytes()
 
 
-def _overview_click(event, frame_shape) -> tuple[float, float] | None:
+def overview_click(event, frame_shape) -> tuple[float, float] | None:
     """Frame coordinates of a click on a frame overview, from the ipyevents message it sent.
 
     Parameters

@@ -12,8 +12,8 @@ from ._common import (
     _SLIDER_STYLE,
     SERVO_OVERVIEW_CLASS,
     _layout,
-    _overview_click,
     _png_figure,
+    overview_click,
     overview_image,
 )
 
@@ -318,7 +318,7 @@ class ServoPanel:
 
     def _on_overview_event(self, event):
         """An ipyevents message from the overview: a click there is where the tip should go."""
-        xy = _overview_click(event, self.frame.shape)
+        xy = overview_click(event, self.frame.shape)
         if xy is not None:  # not a click, or a message without usable geometry: nothing to do
             self.go_to(xy)
 

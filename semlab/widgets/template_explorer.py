@@ -23,9 +23,9 @@ from ._common import (
     READOUT_CLASS,
     THRESHOLD_CLASS,
     _layout,
-    _overview_click,
     _png_figure,
     display_to_frame,  # noqa: F401 -- re-exported: it was defined here, and may be imported from here
+    overview_click,
     overview_image,
 )
 
@@ -316,7 +316,7 @@ class TemplateExplorer:
 
     def _on_overview_event(self, event):
         """An ipyevents message from the overview: a click there moves the click point and the ROI."""
-        xy = _overview_click(event, self.frame.shape)
+        xy = overview_click(event, self.frame.shape)
         if xy is None:
             return   # not a click, or a message without usable geometry: nothing to do
         x, y = xy
