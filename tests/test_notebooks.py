@@ -364,9 +364,9 @@ def _claims_07(r):
     # "semlab's default follows the needle in every frame ... on frames 1-5 it agrees within 1.2 px with the
     # needle's displacement measured without it"
     assert r["ic_lost_frames"] == 0 and r["ic_vs_consensus_max_px_frames_1_5"] <= 1.2
-    # "the needle advances 6.5 to 9.8 px per frame against the 9.6 px commanded, 42 px by frame 5; ... 56 px by
+    # "the needle advances 6.6 to 9.7 px per frame against the 9.6 px commanded, 42 px by frame 5; ... 56 px by
     # frame 10"
-    assert (r["needle_step_min_px"], r["needle_step_max_px"], r["commanded_step_px"]) == (6.5, 9.8, 9.6)
+    assert (r["needle_step_min_px"], r["needle_step_max_px"], r["commanded_step_px"]) == (6.6, 9.7, 9.6)
     assert round(r["needle_advance_frame_5_px"]) == 42 and round(r["needle_advance_frame_10_px"]) == 56
     # "The image drifts by up to 2.4 px over the run"
     assert round(r["drift_max_px"], 1) == 2.4
@@ -391,12 +391,12 @@ def _claims_08(r):
     assert r["seeds"] in ([0], [0, 1]) and r["n_families"] == 11
     sem, peer, silent = r["semlab_rmse_over_crb"], r["best_peer_rmse_over_crb"], r["semlab_silent"]
     ahead = ["moves_200px", "wander", "jumps", "gray_charging", "clutter", "shapes", "substrates", "semi_real"]
-    # "On 8 of the 11 families in the full run (...) semlab's median RMSE is below every peer's: 2.2-24x the bound
+    # "On 8 of the 11 families in the full run (...) semlab's median RMSE is below every peer's: 2.2-22x the bound
     # where the best peer is 17-1,400x. On seed 0 it is 9 (1.3-18x against 2.8-960x): there also the two low-dose
     # families, on the few frames it reports, and not the semi-real needle"
     if full:
         assert r["semlab_ahead"] == ahead and r["semlab_behind"] == ["still", "low_dose", "thin_low_dose"]
-        lo, hi, peer_lo, peer_hi = 2.15, 24.5, 16.5, 1400.0
+        lo, hi, peer_lo, peer_hi = 2.15, 22.5, 16.5, 1400.0
     else:
         ahead = ["moves_200px", "wander", "jumps", "low_dose", "gray_charging", "clutter", "thin_low_dose", "shapes",
                  "substrates"]
@@ -422,7 +422,7 @@ def _claims_08(r):
         assert (r["best_peer"]["low_dose"], round(peer["low_dose"], 1)) == ("ecc", 4.7)
     assert 0.455 <= r["best_peer_silent"]["low_dose"] <= 0.725
     # "On the thin needle at low dose it flags 91 % of the frames (82 %) and is silent on 8 % (15 %). On the
-    # semi-real needle semlab is level with the best peer, at 24x the bound where ECC is at 24x (41x against NCC's
+    # semi-real needle semlab is just ahead of the best peer, at 22x the bound where ECC is at 24x (41x against NCC's
     # 39x on seed 0), flagging 23 % of its frames (46 %); it is still silent on 23 % (46 %)"
     # Within a frame (of 39 a seed): whether a frame at the 0.35-px sigma limit on this low-dose needle is flagged
     # follows the CPU's float32 rounding (OpenCV's SIMD path): 31 or 32 frames of seed 0 on two machines.
@@ -430,7 +430,7 @@ def _claims_08(r):
     assert round(silent["thin_low_dose"], 2) == (0.08 if full else 0.15)
     assert round(r["semlab_flagged"]["semi_real"], 2) == (0.23 if full else 0.46)
     assert round(silent["semi_real"], 2) == (0.23 if full else 0.46)
-    assert round(sem["semi_real"]) == (24 if full else 41) and round(peer["semi_real"]) == (24 if full else 39)
+    assert round(sem["semi_real"]) == (22 if full else 41) and round(peer["semi_real"]) == (24 if full else 39)
     assert r["best_peer"]["semi_real"] == ("ecc" if full else "ncc")
     # "semlab reports no frame more than 1 px off as ok on the still probe, the 200-px moves, wander, jumps, low
     # dose, gray-level charging and shapes in both runs; issue 14's <= 0.5 % holds on 7 of the 11 families (9 on

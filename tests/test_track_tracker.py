@@ -441,8 +441,9 @@ def test_run_tracker_counts_a_refused_start_as_lost_frames():
 
 
 # --------------------------------------------------------------------------- band width
-def _textured(texture_sd, noise_sd=8.0, seed=0):
-    """The wedge over a substrate of smooth texture (correlation ~4 px) plus white noise."""
+def _textured(texture_sd, noise_sd=8.0, seed=0, blur=1.0):
+    """The wedge (its edge blurred by ``blur`` px) over a substrate of smooth texture (correlation
+    ~4 px) plus white noise."""
     import cv2
 
     rng = np.random.default_rng(seed)
@@ -453,7 +454,7 @@ def _textured(texture_sd, noise_sd=8.0, seed=0):
     a = np.radians(14.0)
     d = np.where((vx * np.sin(a) + vy * np.cos(a) > 0) & (vx * np.sin(a) - vy * np.cos(a) > 0), np.hypot(vx, vy),
                  np.maximum(vx * np.sin(a) + vy * np.cos(a), vx * np.sin(a) - vy * np.cos(a)))
-    cover = ndtr(-d / 1.0)
+    cover = ndtr(-d / blur)
     return ((60.0 + field) * (1 - cover) + 190.0 * cover + noise_sd * rng.standard_normal(SHAPE)).astype(np.float32)
 
 
@@ -468,9 +469,11 @@ def test_background_texture_is_measured_against_the_noise(ratio):
 
 
 def test_band_reaches_less_far_into_a_textured_background():
+    # A sharp edge (blur 0.5 px, as the simulator's): the edge's own reach (3 σ of its blur,
+    # tests/test_track_edge_blur.py) stays within 2 px.
     flat, textured = Tracker(), Tracker()
-    flat.init(_textured(0.0), ROI)
-    textured.init(_textured(8.0), ROI)
+    flat.init(_textured(0.0, blur=0.5), ROI)
+    textured.init(_textured(8.0, blur=0.5), ROI)
     assert flat.band_widths() == (3, 3) and textured.band_widths() == (2, 3)
     # One px fewer on the background side: fewer band pixels, the object's side alike.
     assert textured.band.sum() < flat.band.sum()
@@ -479,11 +482,11 @@ def test_band_reaches_less_far_into_a_textured_background():
     # An explicit band_px is used on both sides; inner_px deepens the object's side; the
     # paper's methods keep 3 px.
     explicit = Tracker(band_px=3)
-    explicit.init(_textured(8.0), ROI)
+    explicit.init(_textured(8.0, blur=0.5), ROI)
     assert explicit.band_widths() == (3, 3)
     assert Tracker(band_px=2, inner_px=4).band_widths() == (2, 4)
     contour = Tracker("contour")
-    contour.init(_textured(8.0), ROI)
+    contour.init(_textured(8.0, blur=0.5), ROI)
     assert contour.band_widths() == (3, 3)
 
 

@@ -12,6 +12,7 @@ background split, the background tiles and the Gauss–Newton constants.
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 
 import cv2
@@ -26,6 +27,8 @@ from .uncertainty import band_tiles
 __all__ = [
     "DEFAULT_BAND_PX",
     "DENOISE_FROM_FRAMES",
+    "EDGE_BAND_SIGMAS",
+    "MAX_EDGE_BAND_PX",
     "MIN_BAND_PIXELS",
     "NARROW_BAND_TEXTURE",
     "BandModel",
@@ -36,6 +39,7 @@ __all__ = [
     "build_band_model",
     "contour_band",
     "contour_core",
+    "edge_blur",
     "inner_mask",
     "region_contrast",
     "registration_band",
@@ -50,6 +54,22 @@ NARROW_BAND_PX = 2
 #: simulator's textured substrate measures (about half the noise and more, at standard dose) and a
 #: flat background (a quarter of it at most, the noise model's estimate being a few % low).
 NARROW_BAND_TEXTURE = 0.4
+#: The "ic" band reaches this many standard deviations of the edge's blur (:func:`edge_blur`) to
+#: each side of the contour, where that is farther than the widths above: a blurred edge (a real
+#: needle's, 1-2 px) carries its position over its whole transition, which a 2-3 px band cuts off
+#: (3 σ: 99.7 % of an erf edge's slope; the simulator's edges, σ ≈ 0.5 px, keep the widths above).
+EDGE_BAND_SIGMAS = 3.0
+#: ... but no farther than this (px): a wider band takes in the static surroundings beside the edge
+#: (a lamella the needle touches: at 6-7 px its quadrant pulls the real needle's contact frame of
+#: ``contact_brightness_seq`` 2 px off and the frame is flagged inconsistent; at 5 px it is not).
+MAX_EDGE_BAND_PX = 5
+#: :func:`edge_blur` smooths frame 0 by this many px before reading the edge's slope (noise would
+#: otherwise make the slope steeper: the blur is then underestimated, never over).
+EDGE_SMOOTHING_PX = 1.0
+#: The slope is read at the contour pixels this far (px) inside the ROI, within this many px
+#: across the edge (a 5×5 neighbourhood: the contour is the Otsu level, not the steepest point).
+EDGE_BORDER_PX = 8
+EDGE_SEARCH_PX = 2
 #: The "ic" Jacobian is denoised (``jacobian_denoise``) once the template averages this many frames:
 #: averaged over fewer, a low-dose template is too noisy for NL-means' patch similarity to mean anything.
 DENOISE_FROM_FRAMES = 4
@@ -110,7 +130,8 @@ def contour_core(contour: ContourTemplate) -> np.ndarray:
     return core if core.sum() >= MIN_CORE_PIXELS else contour.mask
 
 
-def band_widths(options: BandOptions, method: str, texture: float | None) -> tuple[int, int]:
+def band_widths(options: BandOptions, method: str, texture: float | None,
+                edge_sigma: float = 0.0) -> tuple[int, int]:
     """How far (px) the registration band reaches from the contour: ``(background, object)``.
 
     The band's background pixels do not move with the object: where it moves to, another patch of
@@ -121,7 +142,10 @@ def band_widths(options: BandOptions, method: str, texture: float | None) -> tup
     :data:`NARROW_BAND_TEXTURE` times the noise (bias-limited), :data:`DEFAULT_BAND_PX` otherwise
     (a flat background, or low dose: variance-limited), and 3 px into the object either way; the
     trade is measured over many scenes by ``benchmarks/bench_tracking_seeds.py --param band_px=3``.
-    An explicit ``band_px`` is used on both sides (``inner_px`` deepens the object's side).
+    Both sides reach at least :data:`EDGE_BAND_SIGMAS` times ``edge_sigma``, the edge's blur
+    (:func:`edge_blur`), up to :data:`MAX_EDGE_BAND_PX`: a band narrower than the edge's transition
+    loses the slope that tells where the edge is. An explicit ``band_px`` is used on both sides
+    (``inner_px`` deepens the object's side).
 
     Raises
     ------
@@ -134,7 +158,40 @@ def band_widths(options: BandOptions, method: str, texture: float | None) -> tup
     if texture is None:
         raise RuntimeError("band_widths() with band_px=None needs init(): the background's texture is measured there")
     outside = NARROW_BAND_PX if texture >= NARROW_BAND_TEXTURE else DEFAULT_BAND_PX
-    return outside, max(DEFAULT_BAND_PX, options.inner_px)
+    inside = max(DEFAULT_BAND_PX, options.inner_px)
+    reach = 0
+    if math.isfinite(edge_sigma) and edge_sigma > 0:
+        reach = min(math.ceil(EDGE_BAND_SIGMAS * edge_sigma), MAX_EDGE_BAND_PX)
+    return max(outside, reach), max(inside, reach)
+
+
+def edge_blur(patch, contour: ContourTemplate) -> float:
+    """The edge's blur (px, the σ of a Gaussian-blurred step) along the contour of ``patch``.
+
+    An erf edge of contrast ``C`` blurred by ``σ`` and smoothed by ``s`` rises with a steepest
+    slope of ``C / (√(2π) √(σ² + s²))``: the median over the contour pixels (those
+    :data:`EDGE_BORDER_PX` inside the ROI) of the steepest slope within :data:`EDGE_SEARCH_PX`,
+    on ``patch`` smoothed by :data:`EDGE_SMOOTHING_PX`, gives ``σ``, with ``C`` the object/background
+    contrast of the contour's region. Noise and a bright rim steepen the slope, so they can only
+    make the blur look smaller. 0 when there is no contour to read.
+    """
+    region, mask = contour.region, contour.mask
+    if not (region.any() and not region.all()):
+        return 0.0
+    img = np.asarray(patch, np.float32)
+    contrast = abs(float(img[region].mean() - img[~region].mean()))
+    smoothed = cv2.GaussianBlur(img, (0, 0), EDGE_SMOOTHING_PX)
+    gx, gy = five_point_gradients(smoothed)
+    side = 2 * EDGE_SEARCH_PX + 1
+    steepest = cv2.dilate(np.hypot(gx, gy), np.ones((side, side), np.uint8))
+    read = mask & inner_mask(mask.shape, EDGE_BORDER_PX)
+    if not read.any():
+        return 0.0
+    slope = float(np.median(steepest[read]))
+    if not slope > 0:
+        return 0.0
+    seen = contrast / (math.sqrt(2.0 * math.pi) * slope)
+    return math.sqrt(max(seen * seen - EDGE_SMOOTHING_PX ** 2, 0.0))
 
 
 def registration_band(contour: ContourTemplate, widths: tuple[int, int]) -> np.ndarray:

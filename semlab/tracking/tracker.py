@@ -12,7 +12,7 @@ from ..roi import as_gray_float, check_roi, roi_centre
 from ..subpixel import NoiseModel, estimate_noise
 from ..template import ContourTemplate, identify_contour_template
 from .attached import MAX_OUTLINE_NOISE, clear_band, without_attached
-from .band import MIN_BAND_PIXELS, background_texture, band_widths, registration_band
+from .band import MIN_BAND_PIXELS, background_texture, band_widths, edge_blur, registration_band
 from .consistency import inconsistent
 from .frames import GrayScale, as_frame
 from .ic import ICMethod
@@ -66,7 +66,8 @@ class Tracker:
         Half-width of the band around the contour used for sub-pixel registration. None (the
         default): 3 px, except that ``"ic"`` reaches only 2 px into the background when the
         background's texture is at least :data:`~semlab.tracking.band.NARROW_BAND_TEXTURE` times
-        the noise (see :meth:`band_widths`).
+        the noise, and both sides reach across a blurred edge (3 σ of frame 0's edge blur, at most
+        5 px: :attr:`edge_sigma`; see :meth:`band_widths`).
     inner_px : int
         ``"ic"``: on the object's side the band reaches this deep (its pixels move with the
         object and fix its gray level).
@@ -170,6 +171,8 @@ class Tracker:
         self.method = method
         #: The background's texture over the noise (standard deviations), measured by init().
         self.texture = None
+        #: The edge's blur (px) along frame 0's contour, measured by init() (:func:`~semlab.tracking.band.edge_blur`).
+        self.edge_sigma = 0.0
         self.roi = None
         self.algorithm: Method | None = None
 
@@ -207,6 +210,7 @@ class Tracker:
         noise = estimate_noise(patch)
         contrast, smoothed_sd = _check_contrast(patch, contour, noise, roi, self.options.template.sigma)
         self.texture = background_texture(patch, contour.region, noise)
+        self.edge_sigma = edge_blur(patch, contour)
         widths = self.band_widths()
         attached = None
         # The cut only where the region's bumps are the scene's, not the noise's.
@@ -230,7 +234,7 @@ class Tracker:
     def band_widths(self) -> tuple[int, int]:
         """How far (px) the registration band reaches from the contour: ``(background, object)``
         (:func:`semlab.tracking.band.band_widths`)."""
-        return band_widths(self.options.band, self.method, self.texture)
+        return band_widths(self.options.band, self.method, self.texture, self.edge_sigma)
 
     # ------------------------------------------------------------------ the options as attributes
     def __getattr__(self, name: str):
