@@ -165,21 +165,23 @@ def band_widths(options: BandOptions, method: str, texture: float | None,
     return max(outside, reach), max(inside, reach)
 
 
-def edge_blur(patch, contour: ContourTemplate) -> float:
+def edge_blur(patch, contour: ContourTemplate, contrast: float | None = None) -> float:
     """The edge's blur (px, the σ of a Gaussian-blurred step) along the contour of ``patch``.
 
     An erf edge of contrast ``C`` blurred by ``σ`` and smoothed by ``s`` rises with a steepest
     slope of ``C / (√(2π) √(σ² + s²))``: the median over the contour pixels (those
     :data:`EDGE_BORDER_PX` inside the ROI) of the steepest slope within :data:`EDGE_SEARCH_PX`,
     on ``patch`` smoothed by :data:`EDGE_SMOOTHING_PX`, gives ``σ``, with ``C`` the object/background
-    contrast of the contour's region. Noise and a bright rim steepen the slope, so they can only
-    make the blur look smaller. 0 when there is no contour to read.
+    contrast of the contour's region (``contrast``, when the caller has measured it already). Noise
+    and a bright rim steepen the slope, so they can only make the blur look smaller. 0 when there is
+    no contour to read.
     """
     region, mask = contour.region, contour.mask
     if not (region.any() and not region.all()):
         return 0.0
     img = np.asarray(patch, np.float32)
-    contrast = abs(float(img[region].mean() - img[~region].mean()))
+    if contrast is None:
+        contrast = region_contrast(img, region, default=0.0)
     smoothed = cv2.GaussianBlur(img, (0, 0), EDGE_SMOOTHING_PX)
     gx, gy = five_point_gradients(smoothed)
     side = 2 * EDGE_SEARCH_PX + 1

@@ -210,7 +210,7 @@ class Tracker:
         noise = estimate_noise(patch)
         contrast, smoothed_sd = _check_contrast(patch, contour, noise, roi, self.options.template.sigma)
         self.texture = background_texture(patch, contour.region, noise)
-        self.edge_sigma = edge_blur(patch, contour)
+        self.edge_sigma = edge_blur(patch, contour, contrast)
         widths = self.band_widths()
         attached = None
         # The cut only where the region's bumps are the scene's, not the noise's.
