@@ -434,12 +434,12 @@ def _claims_08(r):
     assert r["best_peer"]["semi_real"] == ("ecc" if full else "ncc")
     # "semlab reports no frame more than 1 px off as ok on the still probe, the 200-px moves, wander, jumps, low
     # dose, gray-level charging and shapes in both runs; issue 14's <= 0.5 % holds on 7 of the 11 families (9 on
-    # seed 0). It does not on clutter and substrates in the full run (24.5 % and 3 %, from seed 1), ..."
+    # seed 0). It does not on clutter and substrates in the full run (25.5 % and 3 %, from seed 1), ..."
     assert all(silent[f] == 0 for f in ("still", "moves_200px", "wander", "jumps", "low_dose", "gray_charging",
                                          "shapes"))
     assert sum(v <= 0.005 for v in silent.values()) == (7 if full else 9)
     if full:
-        assert (round(silent["clutter"], 3), round(silent["substrates"], 2)) == (0.245, 0.03)
+        assert (round(silent["clutter"], 3), round(silent["substrates"], 2)) == (0.255, 0.03)
     # "coverage95 ... is 0.86-1 on every family but the semi-real needle and the thin needle at low dose (and clutter
     # in the full run), where it is 0.6 or less and semlab is silent on 8-46 % of its frames"
     cov = r["coverage95"]

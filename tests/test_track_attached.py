@@ -19,6 +19,8 @@ from semlab.tracking.attached import BAND_CLEARANCE_PX, attached_pieces, without
 PARTICLE_AT = (100.0, 89.5)
 PARTICLE_RADIUS = 5.0
 BLUR = 1.2
+#: A particle larger than the opening's smallest disc, half sunk into the flank (the corpus's clutter).
+SUNK_RADIUS = 7.0
 
 
 def _disc(at, radius, shape):
@@ -26,11 +28,11 @@ def _disc(at, radius, shape):
     return 0.5 * (1 - erf((np.hypot(xx - at[0], yy - at[1]) - radius) / (math.sqrt(2) * BLUR)))
 
 
-def _with_particle(dx=0.0, *, level=0.6, at=PARTICLE_AT, seed=None):
+def _with_particle(dx=0.0, *, level=0.6, at=PARTICLE_AT, radius=PARTICLE_RADIUS, seed=None):
     """The analytic wedge moved by ``dx``, a static particle of ``level`` times its contrast touching its
     upper flank; Poisson noise (variance = level, as in an SE image) when ``seed`` is given."""
     img = wedge_frame(dx, 0.0).astype(np.float64)
-    img = np.maximum(img, 50.0 + 130.0 * level * _disc(at, PARTICLE_RADIUS, img.shape))
+    img = np.maximum(img, 50.0 + 130.0 * level * _disc(at, radius, img.shape))
     if seed is not None:
         img = np.random.default_rng(seed).poisson(img)
     return img.astype(np.float32)
@@ -85,6 +87,46 @@ def test_a_static_particle_no_longer_holds_the_probe_back():
     # about 0.15 px (1 sigma), so 0.6 px is 4 sigma.
     def worst(**kw):
         frames = [_with_particle(0.6 * k, seed=k) for k in range(16)]
+        t = Tracker(**kw)
+        t.init(frames[0], ROI)
+        errors = []
+        for k, frame in enumerate(frames[1:], 1):
+            r = t.update(frame)
+            assert r.ok
+            errors.append(abs(r.x - CENTRE[0] - 0.6 * k))
+        return max(errors)
+
+    cut, kept = worst(), worst(cut_attached=False)
+    assert cut < 0.6 < kept
+
+
+def _sunk(outside_px, radius=SUNK_RADIUS):
+    """The centre of a particle of ``radius`` whose centre is ``outside_px`` beyond the wedge's upper flank
+    at x = 95 (the flank is at y = 100 − 25·tan 14° there, its outward normal 14° off the vertical)."""
+    half = math.radians(14.0)
+    return 95.0, 100.0 - 25.0 * math.tan(half) - outside_px / math.cos(half)
+
+
+
+@pytest.mark.parametrize("outside_px", [2.0, 4.0])
+def test_a_particle_sunk_into_the_flank_is_cut(outside_px):
+    # Its centre 2-4 px beyond the flank, the particle's neck to the shaft is wider than the smallest
+    # disc: only the larger ones shave its cap, and the cut stays at the particle.
+    at = _sunk(outside_px)
+    patch = _roi(_with_particle(at=at, radius=SUNK_RADIUS))
+    pieces = attached_pieces(identify_contour_template(patch).region, patch)
+    ys, xs = np.nonzero(pieces)
+    assert xs.size and math.dist((xs.mean() + ROI[0], ys.mean() + ROI[1]), at) < SUNK_RADIUS
+
+
+@pytest.mark.parametrize("outside_px", [2.0, 4.0])
+def test_a_sunk_static_particle_no_longer_holds_the_probe_back(outside_px):
+    # As test_a_static_particle_no_longer_holds_the_probe_back, the particle larger and sunk into the flank:
+    # kept, it holds the wedge back by more than a pixel while every frame says ok.
+    at = _sunk(outside_px)
+
+    def worst(**kw):
+        frames = [_with_particle(0.6 * k, at=at, radius=SUNK_RADIUS, seed=k) for k in range(16)]
         t = Tracker(**kw)
         t.init(frames[0], ROI)
         errors = []

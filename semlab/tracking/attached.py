@@ -7,17 +7,20 @@ partly on a feature that does not move with the probe, and along the shaft, wher
 tells the position, a bump of a few px holds the template back by a pixel or more while the fit
 reports a good match (the corpus's clutter family: static particles touching the edge in frame 0).
 
-A bump is what a morphological opening of the region's main part with a disc of
-:data:`OPENING_RADIUS_PX` leaves out (a particle smaller than the disc is shaved off, a larger one
-survives the erosion apart from the main part): a compact piece (:data:`MIN_ROUNDNESS` of its
-enclosing circle), of a particle's size (:data:`MIN_PIECE_PX`-:data:`MAX_PIECE_PX`), away from the
-apex (the region's point farthest from where it enters the ROI, which the opening also shaves: a
-wedge's tip is a compact piece too) and from the ROI's border, and dimmer than the probe (:data:`MAX_RELATIVE_LEVEL` of the probe's contrast
-over the background: another material or a rounded particle, where a gripper's jaw or a blunt
-tip's corner, which the opening also takes off, is the probe's own material). Such a piece is cut
-off the region (:func:`without_attached`) and the band keeps :data:`BAND_CLEARANCE_PX` away from
-it. Only where the outline is resolved above the noise (:data:`MAX_OUTLINE_NOISE` of the contrast):
-at low dose the noise itself makes bumps of the region's outline.
+A bump is what a morphological opening of the region's main part with a disc leaves out (a particle
+smaller than the disc is shaved off, a larger one survives the erosion apart from the main part), at
+each radius of :data:`OPENING_RADII_PX`: a small disc takes off a particle that touches the edge, a
+larger one the cap of a particle sunk into the flank, which a small disc leaves joined to the shaft
+by a wide neck. A piece is cut when it is compact (:data:`MIN_ROUNDNESS` of its enclosing circle),
+of a particle's size (:data:`MIN_PIECE_PX`-:data:`MAX_PIECE_PX`), away from the apex
+(:data:`APEX_CLEARANCE_PX` from the region's point farthest from where it enters the ROI, which the
+opening also shaves: a wedge's tip is a compact piece too) and from the ROI's border, and dimmer
+than the probe (:data:`MAX_RELATIVE_LEVEL` of the probe's contrast over the background: another
+material or a rounded particle, where a gripper's jaw or a blunt tip's corner, which the opening
+also takes off, is the probe's own material). Such a piece is cut off the region
+(:func:`without_attached`) and the band keeps :data:`BAND_CLEARANCE_PX` away from it. Only where
+the outline is resolved above the noise (:data:`MAX_OUTLINE_NOISE` of the contrast): at low dose
+the noise itself makes bumps of the region's outline.
 """
 
 from __future__ import annotations
@@ -31,18 +34,25 @@ from ..template import ContourTemplate, identify_contour_template
 
 __all__ = ["BAND_CLEARANCE_PX", "MAX_OUTLINE_NOISE", "attached_pieces", "clear_band", "without_attached"]
 
-#: Radius (px) of the opening's disc: particles of a few px touching the edge come off, the shaft
-#: stays (the corpus's particles are 1-5 px in radius, a probe's shaft is wider than 10 px).
-OPENING_RADIUS_PX = 4
+#: Radii (px) of the openings' discs. At 4 px particles of a few px touching the edge come off and
+#: the shaft stays (a probe's shaft is wider than 10 px); a particle of 5-8 px in radius half sunk
+#: into the flank (the corpus's clutter and charging scenes) survives that disc, joined to the shaft
+#: by a neck wider than it, and only the larger discs shave its cap.
+OPENING_RADII_PX = (4, 6, 8)
 #: A piece between these areas (px²) is particle-sized: smaller is the outline's own roughness or a
 #: corner the opening shaves (the real needle's corner in ``data/real-sem/contact_brightness_seq``:
 #: 10 px), larger is a part of the probe (a jaw, a shoulder).
 MIN_PIECE_PX = 15
 MAX_PIECE_PX = 160
-#: A piece fills at least this fraction of its enclosing circle (a disc fills 1, a sliver far less).
-MIN_ROUNDNESS = 0.45
-#: A piece at most this many px from the apex is the apex, shaved by the opening.
-APEX_CLEARANCE_PX = 3
+#: A piece fills at least this fraction of its enclosing circle (a disc fills 1, a sliver far less), at
+#: each radius of :data:`OPENING_RADII_PX`: the larger discs shave a sunk particle's cap, a segment of
+#: a disc, which fills less of its circle than a whole particle does.
+MIN_ROUNDNESS = (0.45, 0.3, 0.3)
+#: A piece at most this many px from the apex is the probe's end, shaved by the opening, at each radius
+#: of :data:`OPENING_RADII_PX`: the smallest disc shaves the apex itself, the larger ones also the far
+#: corner of a flat end (the real needle's in ``data/real-sem/contact_brightness_seq``: 11.5-13.4 px
+#: from its apex, a 15-22-px piece at 6-8 px, dim at its edge like a particle).
+APEX_CLEARANCE_PX = (3, 16, 16)
 #: A piece whose median level (the ROI smoothed by 1 px) reaches this fraction of the probe's
 #: contrast over the background is the probe's own material; particles touching the probe on the
 #: development scenes are at 0.45-0.87 of it, gripper jaws' tips at 0.9-1.2.
@@ -76,10 +86,11 @@ def _apex(region: np.ndarray) -> tuple[int, int] | None:
     return int(x), int(y)
 
 
-def _body(region: np.ndarray) -> np.ndarray:
-    """The opening of the region's main part: its largest component after the erosion, dilated back.
-    A particle wider than the disc survives the erosion as a component of its own, and so is not body."""
-    disc = _disc(OPENING_RADIUS_PX)
+def _body(region: np.ndarray, radius: int) -> np.ndarray:
+    """The opening of the region's main part with a disc of ``radius``: its largest component after
+    the erosion, dilated back. A particle wider than the disc survives the erosion as a component of
+    its own, and so is not body."""
+    disc = _disc(radius)
     eroded = cv2.erode(region.astype(np.uint8), disc)
     n, labels, stats, _ = cv2.connectedComponentsWithStats(eroded, connectivity=8)
     if n < 2:
@@ -119,27 +130,36 @@ def attached_pieces(region, patch) -> np.ndarray:
     if levels is None or levels[0] == levels[1]:
         return cut
     probe, background = levels
-    shaved = (region & ~_body(region)).astype(np.uint8)
-    n, labels, stats, _ = cv2.connectedComponentsWithStats(shaved, connectivity=4)
     apex = _apex(region)
-    h, w = region.shape
-    for i in range(1, n):
-        x, y, bw, bh, area = (int(v) for v in stats[i])
-        if not MIN_PIECE_PX <= area <= MAX_PIECE_PX or x == 0 or y == 0 or x + bw >= w or y + bh >= h:
-            continue
-        piece = labels == i
-        if apex is not None:
-            to_piece = cv2.distanceTransform((~piece).astype(np.uint8), cv2.DIST_L2, 3)
-            if to_piece[apex[1], apex[0]] <= APEX_CLEARANCE_PX:
-                continue
-        points = np.column_stack(np.nonzero(piece)[::-1]).astype(np.float32)
-        _, radius = cv2.minEnclosingCircle(points)
-        if area < MIN_ROUNDNESS * np.pi * max(radius, 0.5) ** 2:
-            continue
-        if (float(np.median(smoothed[piece])) - background) / (probe - background) >= MAX_RELATIVE_LEVEL:
-            continue
-        cut |= piece
+    for radius, roundness, clearance in zip(OPENING_RADII_PX, MIN_ROUNDNESS, APEX_CLEARANCE_PX):
+        shaved = (region & ~_body(region, radius)).astype(np.uint8)
+        n, labels, stats, _ = cv2.connectedComponentsWithStats(shaved, connectivity=4)
+        for i in range(1, n):
+            piece = labels == i
+            if _is_particle(piece, stats[i], apex, clearance, roundness, smoothed, (probe, background)):
+                cut |= piece
     return cut
+
+
+def _is_particle(piece, stats, apex, clearance: float, roundness: float, smoothed, levels) -> bool:
+    """Whether one shaved ``piece`` (its ``stats`` row of ``connectedComponentsWithStats``) is an
+    attached particle: particle-sized, off the ROI's border, more than ``clearance`` px from the
+    ``apex`` (None: no apex), at least ``roundness`` of its enclosing circle, and dimmer than the
+    probe (``levels``: the probe's and the background's)."""
+    x, y, bw, bh, area = (int(v) for v in stats)
+    h, w = piece.shape
+    if not MIN_PIECE_PX <= area <= MAX_PIECE_PX or x == 0 or y == 0 or x + bw >= w or y + bh >= h:
+        return False
+    if apex is not None:
+        to_piece = cv2.distanceTransform((~piece).astype(np.uint8), cv2.DIST_L2, 3)
+        if to_piece[apex[1], apex[0]] <= clearance:
+            return False
+    points = np.column_stack(np.nonzero(piece)[::-1]).astype(np.float32)
+    _, radius = cv2.minEnclosingCircle(points)
+    if area < roundness * np.pi * max(radius, 0.5) ** 2:
+        return False
+    probe, background = levels
+    return (float(np.median(smoothed[piece])) - background) / (probe - background) < MAX_RELATIVE_LEVEL
 
 
 def without_attached(contour: ContourTemplate, patch) -> tuple[ContourTemplate, np.ndarray | None]:
