@@ -80,23 +80,27 @@ def test_the_tracker_cuts_it_and_keeps_the_band_clear():
     assert np.hypot(bx[:, None] - xs[None], by[:, None] - ys[None]).min() >= BAND_CLEARANCE_PX - 1
 
 
+def _worst_error(particle, **options):
+    """The largest x error (px) of a Tracker(**options) over 15 frames of the wedge moving 0.6 px a frame
+    along its axis past a static particle (``particle``: :func:`_with_particle`'s keywords); every frame
+    must say ok."""
+    frames = [_with_particle(0.6 * k, seed=k, **particle) for k in range(16)]
+    t = Tracker(**options)
+    t.init(frames[0], ROI)
+    errors = []
+    for k, frame in enumerate(frames[1:], 1):
+        r = t.update(frame)
+        assert r.ok
+        errors.append(abs(r.x - CENTRE[0] - 0.6 * k))
+    return max(errors)
+
+
 def test_a_static_particle_no_longer_holds_the_probe_back():
     # The wedge moves 0.6 px a frame along its axis, the particle stays. Kept in the template, it pulls the
     # fit back along the shaft (where only the apex tells x) as the wedge leaves it; cut, the track stays
     # within the noise: Poisson noise of ~7 gray levels on a contrast of 130 puts a single frame's x within
     # about 0.15 px (1 sigma), so 0.6 px is 4 sigma.
-    def worst(**kw):
-        frames = [_with_particle(0.6 * k, seed=k) for k in range(16)]
-        t = Tracker(**kw)
-        t.init(frames[0], ROI)
-        errors = []
-        for k, frame in enumerate(frames[1:], 1):
-            r = t.update(frame)
-            assert r.ok
-            errors.append(abs(r.x - CENTRE[0] - 0.6 * k))
-        return max(errors)
-
-    cut, kept = worst(), worst(cut_attached=False)
+    cut, kept = _worst_error({}), _worst_error({}, cut_attached=False)
     assert cut < 0.6 < kept
 
 
@@ -105,7 +109,6 @@ def _sunk(outside_px, radius=SUNK_RADIUS):
     at x = 95 (the flank is at y = 100 − 25·tan 14° there, its outward normal 14° off the vertical)."""
     half = math.radians(14.0)
     return 95.0, 100.0 - 25.0 * math.tan(half) - outside_px / math.cos(half)
-
 
 
 @pytest.mark.parametrize("outside_px", [2.0, 4.0])
@@ -123,20 +126,8 @@ def test_a_particle_sunk_into_the_flank_is_cut(outside_px):
 def test_a_sunk_static_particle_no_longer_holds_the_probe_back(outside_px):
     # As test_a_static_particle_no_longer_holds_the_probe_back, the particle larger and sunk into the flank:
     # kept, it holds the wedge back by more than a pixel while every frame says ok.
-    at = _sunk(outside_px)
-
-    def worst(**kw):
-        frames = [_with_particle(0.6 * k, at=at, radius=SUNK_RADIUS, seed=k) for k in range(16)]
-        t = Tracker(**kw)
-        t.init(frames[0], ROI)
-        errors = []
-        for k, frame in enumerate(frames[1:], 1):
-            r = t.update(frame)
-            assert r.ok
-            errors.append(abs(r.x - CENTRE[0] - 0.6 * k))
-        return max(errors)
-
-    cut, kept = worst(), worst(cut_attached=False)
+    particle = {"at": _sunk(outside_px), "radius": SUNK_RADIUS}
+    cut, kept = _worst_error(particle), _worst_error(particle, cut_attached=False)
     assert cut < 0.6 < kept
 
 
