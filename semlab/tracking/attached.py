@@ -41,8 +41,10 @@ __all__ = ["BAND_CLEARANCE_PX", "MAX_OUTLINE_NOISE", "attached_pieces", "clear_b
 OPENING_RADII_PX = (4, 6, 8)
 #: A piece between these areas (px²) is particle-sized: smaller is the outline's own roughness or a
 #: corner the opening shaves (the real needle's corner in ``data/real-sem/contact_brightness_seq``:
-#: 10 px), larger is a part of the probe (a jaw, a shoulder).
-MIN_PIECE_PX = 15
+#: 10 px, at the smallest disc), larger is a part of the probe (a jaw, a shoulder). The least area is
+#: one per radius of :data:`OPENING_RADII_PX`: the larger discs shave the cap of a particle sunk deep
+#: into the flank, a segment of 8-14 px, and the probe's corners there are kept by the apex clearance.
+MIN_PIECE_PX = (15, 8, 8)
 MAX_PIECE_PX = 160
 #: A piece fills at least this fraction of its enclosing circle (a disc fills 1, a sliver far less), at
 #: each radius of :data:`OPENING_RADII_PX`: the larger discs shave a sunk particle's cap, a segment of
@@ -131,24 +133,27 @@ def attached_pieces(region, patch) -> np.ndarray:
         return cut
     probe, background = levels
     apex = _apex(region)
-    for radius, roundness, clearance in zip(OPENING_RADII_PX, MIN_ROUNDNESS, APEX_CLEARANCE_PX):
+    for radius, least, roundness, clearance in zip(OPENING_RADII_PX, MIN_PIECE_PX, MIN_ROUNDNESS,
+                                                   APEX_CLEARANCE_PX):
         shaved = (region & ~_body(region, radius)).astype(np.uint8)
         n, labels, stats, _ = cv2.connectedComponentsWithStats(shaved, connectivity=4)
         for i in range(1, n):
             piece = labels == i
-            if _is_particle(piece, stats[i], apex, clearance, roundness, smoothed, (probe, background)):
+            if _is_particle(piece, stats[i], (least, apex, clearance, roundness), smoothed, (probe, background)):
                 cut |= piece
     return cut
 
 
-def _is_particle(piece, stats, apex, clearance: float, roundness: float, smoothed, levels) -> bool:
+def _is_particle(piece, stats, tests, smoothed, levels) -> bool:
     """Whether one shaved ``piece`` (its ``stats`` row of ``connectedComponentsWithStats``) is an
-    attached particle: particle-sized, off the ROI's border, more than ``clearance`` px from the
-    ``apex`` (None: no apex), at least ``roundness`` of its enclosing circle, and dimmer than the
-    probe (``levels``: the probe's and the background's)."""
+    attached particle. ``tests = (least, apex, clearance, roundness)``: at least ``least`` px and
+    particle-sized, off the ROI's border, more than ``clearance`` px from the ``apex`` (None: no
+    apex), at least ``roundness`` of its enclosing circle; and dimmer than the probe (``levels``:
+    the probe's and the background's)."""
+    least, apex, clearance, roundness = tests
     x, y, bw, bh, area = (int(v) for v in stats)
     h, w = piece.shape
-    if not MIN_PIECE_PX <= area <= MAX_PIECE_PX or x == 0 or y == 0 or x + bw >= w or y + bh >= h:
+    if not least <= area <= MAX_PIECE_PX or x == 0 or y == 0 or x + bw >= w or y + bh >= h:
         return False
     if apex is not None:
         to_piece = cv2.distanceTransform((~piece).astype(np.uint8), cv2.DIST_L2, 3)
