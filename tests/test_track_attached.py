@@ -115,7 +115,7 @@ def _sunk(outside_px, radius=SUNK_RADIUS):
 def test_a_particle_sunk_into_the_flank_is_cut(outside_px):
     # Its centre 1-4 px beyond the flank, the particle's neck to the shaft is wider than the smallest
     # disc: only the larger ones shave its cap (at 1 px a 12-px segment, under the smallest disc's
-    # MIN_PIECE_PX), and the cut stays at the particle.
+    # least area), and the cut stays at the particle.
     at = _sunk(outside_px)
     patch = _roi(_with_particle(at=at, radius=SUNK_RADIUS))
     pieces = attached_pieces(identify_contour_template(patch).region, patch)
@@ -144,7 +144,7 @@ def test_noise_bumps_are_not_cut_at_low_dose():
 
 def test_the_real_needle_s_corner_is_not_a_particle():
     # The AutoLiftout needle's corner in frame 0 of data/real-sem/contact_brightness_seq is a 10-px piece
-    # the smallest opening shaves off: below its MIN_PIECE_PX, so the needle keeps it (cut, the needle was lost from
+    # the smallest opening shaves off: below its least area, so the needle keeps it (cut, the needle was lost from
     # the contact on, frame 5).
     import semlab
     from semlab.roi import roi_from_click

@@ -9,12 +9,11 @@ reports a good match (the corpus's clutter family: static particles touching the
 
 A bump is what a morphological opening of the region's main part with a disc leaves out (a particle
 smaller than the disc is shaved off, a larger one survives the erosion apart from the main part), at
-each radius of :data:`OPENING_RADII_PX`: a small disc takes off a particle that touches the edge, a
+each of :data:`OPENINGS`: a small disc takes off a particle that touches the edge, a
 larger one the cap of a particle sunk into the flank, which a small disc leaves joined to the shaft
-by a wide neck. A piece is cut when it is compact (:data:`MIN_ROUNDNESS` of its enclosing circle),
-of a particle's size (:data:`MIN_PIECE_PX`-:data:`MAX_PIECE_PX`), away from the apex
-(:data:`APEX_CLEARANCE_PX` from the region's point farthest from where it enters the ROI, which the
-opening also shaves: a wedge's tip is a compact piece too) and from the ROI's border, and dimmer
+by a wide neck. A piece is cut when it is compact (a fraction of its enclosing circle), of a
+particle's size (up to :data:`MAX_PIECE_PX`), away from the apex (the region's point farthest from
+where it enters the ROI, which the opening also shaves: a wedge's tip is a compact piece too) and from the ROI's border, and dimmer
 than the probe (:data:`MAX_RELATIVE_LEVEL` of the probe's contrast over the background: another
 material or a rounded particle, where a gripper's jaw or a blunt tip's corner, which the opening
 also takes off, is the probe's own material). Such a piece is cut off the region
@@ -26,6 +25,7 @@ the noise itself makes bumps of the region's outline.
 from __future__ import annotations
 
 import dataclasses
+from typing import NamedTuple
 
 import cv2
 import numpy as np
@@ -34,27 +34,32 @@ from ..template import ContourTemplate, identify_contour_template
 
 __all__ = ["BAND_CLEARANCE_PX", "MAX_OUTLINE_NOISE", "attached_pieces", "clear_band", "without_attached"]
 
-#: Radii (px) of the openings' discs. At 4 px particles of a few px touching the edge come off and
-#: the shaft stays (a probe's shaft is wider than 10 px); a particle of 5-8 px in radius half sunk
-#: into the flank (the corpus's clutter and charging scenes) survives that disc, joined to the shaft
-#: by a neck wider than it, and only the larger discs shave its cap.
-OPENING_RADII_PX = (4, 6, 8)
-#: A piece between these areas (px²) is particle-sized: smaller is the outline's own roughness or a
-#: corner the opening shaves (the real needle's corner in ``data/real-sem/contact_brightness_seq``:
-#: 10 px, at the smallest disc), larger is a part of the probe (a jaw, a shoulder). The least area is
-#: one per radius of :data:`OPENING_RADII_PX`: the larger discs shave the cap of a particle sunk deep
-#: into the flank, a segment of 8-14 px, and the probe's corners there are kept by the apex clearance.
-MIN_PIECE_PX = (15, 8, 8)
+
+class Opening(NamedTuple):
+    """One morphological opening of the region, and what a piece it shaves off must be to be a particle."""
+
+    #: Radius (px) of the opening's disc.
+    radius: int
+    #: Least area (px²) of a particle's piece.
+    min_area: int
+    #: Least fraction of its enclosing circle a piece fills (a disc fills 1, a sliver far less).
+    min_roundness: float
+    #: A piece at most this many px from the apex is the probe's end, which the opening also shaves.
+    apex_clearance: float
+
+
+#: The openings. At 4 px particles of a few px touching the edge come off and the shaft stays (a
+#: probe's shaft is wider than 10 px); its least area keeps the outline's own roughness and the
+#: corners it shaves (the real needle's in ``data/real-sem/contact_brightness_seq``: 10 px). A
+#: particle of 5-8 px in radius half sunk into the flank (the corpus's clutter and charging scenes)
+#: survives that disc, joined to the shaft by a neck wider than it, and only the larger discs shave
+#: its cap: a segment of a disc, 8 px and more when it is sunk deep, which fills less of its circle
+#: than a whole particle does. They also shave the far corner of a flat end (the real needle's:
+#: 11.5-13.4 px from its apex, a 15-22-px piece at 6-8 px, dim at its edge like a particle), hence
+#: their apex clearance.
+OPENINGS = (Opening(4, 15, 0.45, 3), Opening(6, 8, 0.3, 16), Opening(8, 8, 0.3, 16))
+#: A piece larger than this (px²) is a part of the probe (a jaw, a shoulder).
 MAX_PIECE_PX = 160
-#: A piece fills at least this fraction of its enclosing circle (a disc fills 1, a sliver far less), at
-#: each radius of :data:`OPENING_RADII_PX`: the larger discs shave a sunk particle's cap, a segment of
-#: a disc, which fills less of its circle than a whole particle does.
-MIN_ROUNDNESS = (0.45, 0.3, 0.3)
-#: A piece at most this many px from the apex is the probe's end, shaved by the opening, at each radius
-#: of :data:`OPENING_RADII_PX`: the smallest disc shaves the apex itself, the larger ones also the far
-#: corner of a flat end (the real needle's in ``data/real-sem/contact_brightness_seq``: 11.5-13.4 px
-#: from its apex, a 15-22-px piece at 6-8 px, dim at its edge like a particle).
-APEX_CLEARANCE_PX = (3, 16, 16)
 #: A piece whose median level (the ROI smoothed by 1 px) reaches this fraction of the probe's
 #: contrast over the background is the probe's own material; particles touching the probe on the
 #: development scenes are at 0.45-0.87 of it, gripper jaws' tips at 0.9-1.2.
@@ -133,35 +138,42 @@ def attached_pieces(region, patch) -> np.ndarray:
         return cut
     probe, background = levels
     apex = _apex(region)
-    for radius, least, roundness, clearance in zip(OPENING_RADII_PX, MIN_PIECE_PX, MIN_ROUNDNESS,
-                                                   APEX_CLEARANCE_PX):
-        shaved = (region & ~_body(region, radius)).astype(np.uint8)
+    to_apex = None
+    # Every pixel's distance to the apex, once: the 3×3 chamfer metric is symmetric, so the apex's
+    # distance to a piece is this map's least value over it.
+    if apex is not None:
+        away = np.ones(region.shape, np.uint8)
+        away[apex[1], apex[0]] = 0
+        to_apex = cv2.distanceTransform(away, cv2.DIST_L2, 3)
+    for opening in OPENINGS:
+        shaved = (region & ~_body(region, opening.radius)).astype(np.uint8)
         n, labels, stats, _ = cv2.connectedComponentsWithStats(shaved, connectivity=4)
         for i in range(1, n):
-            piece = labels == i
-            if _is_particle(piece, stats[i], (least, apex, clearance, roundness), smoothed, (probe, background)):
-                cut |= piece
+            if _particle_sized(stats[i], opening, region.shape):
+                piece = labels == i
+                if _is_particle(piece, int(stats[i, cv2.CC_STAT_AREA]), opening, to_apex, smoothed,
+                                (probe, background)):
+                    cut |= piece
     return cut
 
 
-def _is_particle(piece, stats, tests, smoothed, levels) -> bool:
-    """Whether one shaved ``piece`` (its ``stats`` row of ``connectedComponentsWithStats``) is an
-    attached particle. ``tests = (least, apex, clearance, roundness)``: at least ``least`` px and
-    particle-sized, off the ROI's border, more than ``clearance`` px from the ``apex`` (None: no
-    apex), at least ``roundness`` of its enclosing circle; and dimmer than the probe (``levels``:
-    the probe's and the background's)."""
-    least, apex, clearance, roundness = tests
+def _particle_sized(stats, opening: Opening, shape) -> bool:
+    """Whether a shaved piece (its ``stats`` row of ``connectedComponentsWithStats``) has a particle's
+    area and stays off the ROI's border."""
     x, y, bw, bh, area = (int(v) for v in stats)
-    h, w = piece.shape
-    if not least <= area <= MAX_PIECE_PX or x == 0 or y == 0 or x + bw >= w or y + bh >= h:
+    h, w = shape
+    return opening.min_area <= area <= MAX_PIECE_PX and x > 0 and y > 0 and x + bw < w and y + bh < h
+
+
+def _is_particle(piece, area: int, opening: Opening, to_apex, smoothed, levels) -> bool:
+    """Whether a particle-sized shaved ``piece`` of ``area`` px is an attached particle: more than
+    the opening's clearance from the apex (``to_apex``: every pixel's distance to it; None: no
+    apex), round enough, and dimmer than the probe (``levels``: the probe's and the background's)."""
+    if to_apex is not None and float(to_apex[piece].min()) <= opening.apex_clearance:
         return False
-    if apex is not None:
-        to_piece = cv2.distanceTransform((~piece).astype(np.uint8), cv2.DIST_L2, 3)
-        if to_piece[apex[1], apex[0]] <= clearance:
-            return False
     points = np.column_stack(np.nonzero(piece)[::-1]).astype(np.float32)
     _, radius = cv2.minEnclosingCircle(points)
-    if area < roundness * np.pi * max(radius, 0.5) ** 2:
+    if area < opening.min_roundness * np.pi * max(radius, 0.5) ** 2:
         return False
     probe, background = levels
     return (float(np.median(smoothed[piece])) - background) / (probe - background) < MAX_RELATIVE_LEVEL
