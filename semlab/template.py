@@ -1,7 +1,8 @@
 """Contour template identification (Ru et al. 2012, "Contour Template Identification", steps 2-5).
 
 ROI → Gaussian smoothing → Otsu threshold → erosion/dilation → contours organised in a two-level
-hierarchy → the largest external contour is the template (the paper's Fig. 2).
+hierarchy → the largest external contour is the template (the paper's Fig. 2), or, with
+``choose="central"``, the one at the ROI's centre.
 """
 
 from __future__ import annotations
@@ -13,7 +14,14 @@ import numpy as np
 
 from .roi import as_gray_float
 
-__all__ = ["ContourTemplate", "identify_contour_template", "to_uint8"]
+__all__ = ["CONTOUR_CHOICES", "ContourTemplate", "identify_contour_template", "to_uint8"]
+
+#: Which external contour is the object (step 5): ``"largest"``, the paper's (Fig. 2), or
+#: ``"central"``, the one holding the ROI's centre (where the user clicked), else the nearest to it.
+CONTOUR_CHOICES = ("largest", "central")
+#: ``"central"`` weighs only contours of at least this fraction of the largest's area: smaller ones
+#: are specks of noise or clutter left by the opening, not the object, even when nearer the centre.
+MIN_CENTRAL_AREA_FRACTION = 0.1
 
 
 @dataclass
@@ -23,7 +31,7 @@ class ContourTemplate:
     Attributes
     ----------
     points : (K, 2) ndarray of int
-        The largest external contour, ``(x, y)`` in ROI coordinates.
+        The chosen external contour, ``(x, y)`` in ROI coordinates.
     mask : (h, w) ndarray of bool
         The contour's pixels (1 px wide): the paper's contour template (Fig. 1c).
     region : (h, w) ndarray of bool
@@ -72,7 +80,7 @@ def to_uint8(image) -> np.ndarray:
 
 def identify_contour_template(image, *, sigma: float = 2.0, threshold: float | None = None,
                               morph_kernel: int = 3, morph_iterations: int = 1,
-                              bright_object: bool = True) -> ContourTemplate:
+                              bright_object: bool = True, choose: str = "largest") -> ContourTemplate:
     """Identify the contour template in an ROI image (paper, Fig. 2).
 
     Parameters
@@ -91,6 +99,12 @@ def identify_contour_template(image, *, sigma: float = 2.0, threshold: float | N
         How often erosion and then dilation are applied (an opening that removes specks).
     bright_object : bool
         The probe is brighter than the substrate in an SE image; set False for a dark object.
+    choose : {"largest", "central"}
+        Which external contour is the template (step 5). ``"largest"`` is the paper's. ``"central"``
+        departs from it: among the contours of at least :data:`MIN_CENTRAL_AREA_FRACTION` of the
+        largest's area, the one that holds the ROI's centre (the tip the user clicked), else the one
+        nearest to it; the largest contour of an ROI centred on a tip can be a bright blob of the
+        substrate beside it, and a tracker that follows the blob says ``ok`` on every frame.
 
     Returns
     -------
@@ -99,7 +113,8 @@ def identify_contour_template(image, *, sigma: float = 2.0, threshold: float | N
     Raises
     ------
     ValueError
-        If the image is constant or no contour survives (step 5 finds nothing).
+        If the image is constant, no contour survives (step 5 finds nothing) or ``choose`` is
+        not one of :data:`CONTOUR_CHOICES`.
 
     Examples
     --------
@@ -110,6 +125,8 @@ def identify_contour_template(image, *, sigma: float = 2.0, threshold: float | N
     >>> 650 < t.area < 760
     True
     """
+    if choose not in CONTOUR_CHOICES:
+        raise ValueError(f"choose must be one of {CONTOUR_CHOICES}, got {choose!r}")
     gray = to_uint8(image)
     if gray.ndim != 2 or gray.size == 0:
         raise ValueError(f"image must be a non-empty 2-D array, got shape {gray.shape}")
@@ -134,10 +151,10 @@ def identify_contour_template(image, *, sigma: float = 2.0, threshold: float | N
                          f"(threshold {t:.1f}); adjust sigma/threshold or move the ROI")
     hierarchy = hierarchy.reshape(-1, 4)
     external = [i for i in range(len(contours)) if hierarchy[i, 3] < 0]
-    best = max(external, key=lambda i: cv2.contourArea(contours[i]))
+    best = _chosen_contour(contours, external, gray.shape, choose)
     area = float(cv2.contourArea(contours[best]))
     if area < 4.0:
-        raise ValueError("the largest contour in the ROI encloses less than 4 px²: no usable template")
+        raise ValueError(f"the {choose} contour in the ROI encloses less than 4 px²: no usable template")
     mask = np.zeros(gray.shape, np.uint8)
     cv2.drawContours(mask, contours, best, 1, thickness=1)
     region = np.zeros(gray.shape, np.uint8)
@@ -145,3 +162,16 @@ def identify_contour_template(image, *, sigma: float = 2.0, threshold: float | N
     return ContourTemplate(points=contours[best].reshape(-1, 2), mask=mask.astype(bool),
                            region=region.astype(bool), hierarchy=hierarchy, contours=list(contours),
                            smoothed=smoothed, binary=binary, morphed=morphed, threshold=float(t), area=area)
+
+
+def _chosen_contour(contours, external, shape, choose: str) -> int:
+    """The index of the template among the ``external`` contours of an ROI of ``shape`` (see
+    :func:`identify_contour_template`'s ``choose``)."""
+    areas = {i: cv2.contourArea(contours[i]) for i in external}
+    largest = max(external, key=areas.get)
+    if choose == "largest":
+        return largest
+    centre = ((shape[1] - 1) / 2.0, (shape[0] - 1) / 2.0)
+    sizeable = [i for i in external if areas[i] >= MIN_CENTRAL_AREA_FRACTION * areas[largest]]
+    # Signed distance: positive inside the contour, so the one holding the centre deepest wins.
+    return max(sizeable, key=lambda i: cv2.pointPolygonTest(contours[i], centre, True))

@@ -137,3 +137,41 @@ def test_template_errors_name_the_problem():
         identify_contour_template(tiny, sigma=0.0, morph_kernel=0)
     with pytest.raises(ValueError, match=r"^no contour in the ROI: the threshold leaves no object \(threshold 250\.0\)"):
         identify_contour_template(scene(), threshold=250.0, sigma=3.0)
+
+
+def needle_and_blob(tip=(60, 45), blob_at=(95, 75), blob_radius=13, shape=(90, 110)):
+    """A thin bright triangle from the left border to ``tip`` and a larger bright disc, on a dark ROI."""
+    img = np.full(shape, 50, np.uint8)
+    needle = np.array([[0, tip[1] - 8], [tip[0], tip[1]], [0, tip[1] + 8]], np.int32)
+    cv2.fillPoly(img, [needle], 200)
+    cv2.circle(img, blob_at, blob_radius, 200, -1)
+    return img
+
+
+def holds(t, point):
+    return cv2.pointPolygonTest(t.points.reshape(-1, 1, 2).astype(np.int32), point, False) >= 0
+
+
+def test_central_takes_the_contour_at_the_roi_centre_not_the_largest():
+    img = needle_and_blob()  # the needle's tip at the centre (54.5, 44.5): inside it, 5 px from its apex
+    largest, central = identify_contour_template(img), identify_contour_template(img, choose="central")
+    assert holds(largest, (95, 75)) and not holds(largest, (54.5, 44.5))
+    assert holds(central, (54.5, 44.5)) and central.area < largest.area
+    check(largest, reference(img))  # "largest", the default, is the paper's as before
+
+
+def test_central_takes_the_nearest_contour_when_none_holds_the_centre():
+    img = needle_and_blob(tip=(48, 45))  # the tip 6.5 px short of the centre; the blob 30 px away
+    assert holds(identify_contour_template(img, choose="central"), (40, 45))
+
+
+def test_central_passes_over_specks_under_a_tenth_of_the_largest():
+    img = needle_and_blob(tip=(48, 45))
+    cv2.circle(img, (55, 45), 2, 200, -1)  # a 13-px² speck on the centre, the needle ~400 px²
+    central = identify_contour_template(img, choose="central", morph_kernel=0)
+    assert holds(central, (40, 45)) and not holds(central, (55, 45))
+
+
+def test_an_unknown_choice_is_refused():
+    with pytest.raises(ValueError, match="choose must be one of"):
+        identify_contour_template(needle_and_blob(), choose="nearest")

@@ -460,3 +460,23 @@ def test_servo_panel_reports_a_step_out_of_reach(servo_rig):
     assert panel.run() is None
     assert "reach" in panel.error and "refused" in panel.readout.value
     assert panel.response is None
+
+
+def test_the_central_checkbox_picks_the_probe_over_a_larger_blob_as_the_tracker_does():
+    from semlab.tracking import Tracker
+
+    # A thin bright triangle with its tip at the ROI's centre and, in the same ROI, a larger bright disc:
+    # the paper's largest contour is the disc; the default (and the default tracker) take the triangle.
+    frame = np.full(SHAPE, BG, np.float32)
+    cv2.fillPoly(frame, [np.array([[0, 65], [95, 75], [0, 85]], np.int32)], FG)
+    cv2.circle(frame, (150, 120), 24, FG, -1)
+    roi = (15, 0, 150, 150)  # centre (89.5, 74.5): inside the triangle, 5 px from its tip
+    explorer = TemplateExplorer(frame, roi)
+    assert explorer.controls["central"].value and explorer.params["choose"] == "central"
+    central = explorer.result["area_px"]
+    explorer.controls["central"].value = False
+    assert explorer.params["choose"] == "largest"
+    assert explorer.result["area_px"] > central  # the disc, ~1800 px² against the triangle's ~800
+    tracker = Tracker()
+    tracker.init(frame, roi)
+    assert tracker.contour.area == pytest.approx(central)

@@ -179,18 +179,20 @@ def _is_particle(piece, area: int, opening: Opening, to_apex, smoothed, levels) 
     return (float(np.median(smoothed[piece])) - background) / (probe - background) < MAX_RELATIVE_LEVEL
 
 
-def without_attached(contour: ContourTemplate, patch) -> tuple[ContourTemplate, np.ndarray | None]:
+def without_attached(contour: ContourTemplate, patch, *,
+                     choose: str = "central") -> tuple[ContourTemplate, np.ndarray | None]:
     """``(contour, pieces)``: the contour template with its attached particles cut off the region
-    (the largest external contour of what remains), and their pixels; ``(contour, None)`` unchanged
-    when there are none."""
+    (the external contour of what remains that ``choose`` picks, as in
+    :func:`~semlab.template.identify_contour_template`), and their pixels; ``(contour, None)``
+    unchanged when there are none."""
     pieces = attached_pieces(contour.region, patch)
     if not pieces.any():
         return contour, None
     # One px more than the piece: the neck that joined it goes too.
     neck = cv2.dilate(pieces.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
     remaining = np.where(contour.region & ~neck, 255, 0).astype(np.uint8)
-    try:  # the largest external contour of what remains, as frame 0's was found (no smoothing, no morphology)
-        found = identify_contour_template(remaining, sigma=0, threshold=127, morph_kernel=0)
+    try:  # what remains, chosen as frame 0's contour was (no smoothing, no morphology)
+        found = identify_contour_template(remaining, sigma=0, threshold=127, morph_kernel=0, choose=choose)
     except ValueError:
         return contour, None
     cut = dataclasses.replace(contour, points=found.points, mask=found.mask, region=found.region,

@@ -14,6 +14,7 @@ import dataclasses
 import inspect
 from dataclasses import dataclass, field
 
+from ..template import CONTOUR_CHOICES
 from .consistency import MAX_INFLUENCE_PX
 from .trimming import MISFIT_P_VALUE
 from .uncertainty import SIGMA_LIMIT_PX
@@ -121,6 +122,13 @@ class TemplateOptions:
     morph_kernel: int = 3
     morph_iterations: int = 1
     bright_object: bool = True
+    #: Which external contour is the object: None resolves per method ("central" for ``"ic"``,
+    #: the paper's "largest" for the paper's methods).
+    choose: str | None = None
+
+    def __post_init__(self):
+        if self.choose is not None and self.choose not in CONTOUR_CHOICES:
+            _refuse("choose", self.choose, f"be one of {CONTOUR_CHOICES} or None")
 
     def as_kwargs(self) -> dict:
         """The keywords of :func:`~semlab.template.identify_contour_template`."""
@@ -310,6 +318,9 @@ class TrackerOptions:
             groups["contour"] = dataclasses.replace(contour, subpixel=method == "contour")
         else:
             groups["contour"] = dataclasses.replace(contour, subpixel=bool(contour.subpixel))
+        if groups["template"].choose is None:  # the paper's methods keep the paper's largest contour
+            groups["template"] = dataclasses.replace(groups["template"],
+                                                     choose="central" if method == "ic" else "largest")
         min_score = MIN_SCORE[method] if loss.min_score is None else float(loss.min_score)
         groups["loss"] = dataclasses.replace(loss, min_score=min_score)
         return cls(method=method, **groups)

@@ -52,8 +52,10 @@ class Tracker:
         Side of the square search window around the predicted position (paper: 300 px).
     coarse_factor : int
         ``"ic"``: downsampling of the coarse search.
-    sigma, threshold, morph_kernel, morph_iterations, bright_object
-        Contour template identification (:func:`semlab.template.identify_contour_template`).
+    sigma, threshold, morph_kernel, morph_iterations, bright_object, choose
+        Contour template identification (:func:`semlab.template.identify_contour_template`);
+        ``choose=None`` (the default) takes the contour at the ROI's centre for ``"ic"`` and the
+        paper's largest contour for the others.
     canny_sigma, canny_low, canny_high
         Edge detection of ``"contour"`` (:func:`semlab.edges.canny_edges`; thresholds adaptive by
         eq. 10 unless both are given).
@@ -216,7 +218,7 @@ class Tracker:
         # The cut only where the region's bumps are the scene's, not the noise's.
         if (METHOD_CLASSES[self.method].cuts_attached and self.options.band.cut_attached
                 and smoothed_sd <= MAX_OUTLINE_NOISE * contrast):
-            contour, attached = without_attached(contour, raw)
+            contour, attached = without_attached(contour, raw, choose=self.options.template.choose)
         band = clear_band(registration_band(contour, widths), attached)
         if band.sum() < MIN_BAND_PIXELS:
             raise ValueError(f"the contour template in ROI {roi} leaves {int(band.sum())} band pixels away from "

@@ -31,7 +31,7 @@ from ._common import (
 
 
 def explore_template(frame, roi, *, sigma=2.0, threshold=None, morph_kernel=3, morph_iterations=1,
-                     canny_sigma=CANNY_SIGMA, canny_low=None, canny_high=None) -> dict:
+                     choose="central", canny_sigma=CANNY_SIGMA, canny_low=None, canny_high=None) -> dict:
     """Everything the template explorer shows for one set of parameters.
 
     Runs :func:`semlab.template.identify_contour_template` on the ROI (paper, Fig. 2) and
@@ -43,8 +43,9 @@ def explore_template(frame, roi, *, sigma=2.0, threshold=None, morph_kernel=3, m
     ----------
     frame : (M, N) array_like
     roi : (x, y, w, h)
-    sigma, threshold, morph_kernel, morph_iterations
-        As :func:`semlab.template.identify_contour_template` (``threshold=None``: Otsu).
+    sigma, threshold, morph_kernel, morph_iterations, choose
+        As :func:`semlab.template.identify_contour_template` (``threshold=None``: Otsu); ``choose``
+        is ``"central"`` by default, as the default tracker has it (the paper's is ``"largest"``).
     canny_sigma, canny_low, canny_high
         As :func:`semlab.edges.canny_edges`.
 
@@ -64,7 +65,7 @@ def explore_template(frame, roi, *, sigma=2.0, threshold=None, morph_kernel=3, m
            "threshold": float("nan"), "otsu": threshold is None, "area_px": float("nan"), "length_px": 0}
     try:
         t = identify_contour_template(patch, sigma=sigma, threshold=threshold, morph_kernel=morph_kernel,
-                                      morph_iterations=morph_iterations)
+                                      morph_iterations=morph_iterations, choose=choose)
     except ValueError as err:
         out["error"] = str(err)
         if threshold is not None:
@@ -146,7 +147,7 @@ class TemplateExplorer:
     overview_width : int
         Width of the clickable overview, px (the frame is downscaled to it, never upscaled).
     **params
-        Initial ``sigma, threshold, morph_kernel, morph_iterations, canny_sigma, canny_low, canny_high``
+        Initial ``sigma, threshold, morph_kernel, morph_iterations, choose, canny_sigma, canny_low, canny_high``
         (as :func:`explore_template`).
 
     Attributes
@@ -169,7 +170,7 @@ class TemplateExplorer:
         Why the last *ROI from motion* was refused, '' otherwise.
     controls : dict of ipywidgets
         ``click_x, click_y, roi_size, motion, sigma, otsu, threshold, morph_kernel, morph_iterations,
-        adaptive, canny_sigma, canny`` -- set their ``.value`` to drive the explorer from code.
+        central, adaptive, canny_sigma, canny`` -- set their ``.value`` to drive the explorer from code.
     image, readout, ui : ipywidgets
         The rendered figure (PNG), the text readout and the whole panel.
     overview : ipywidgets.Image or None
@@ -180,7 +181,7 @@ class TemplateExplorer:
 
     def __init__(self, frame, roi=None, *, click=None, roi_size=200, pixel_size_nm=None, motion_frames=None,
                  overview_width=440, sigma=2.0, threshold=None, morph_kernel=3, morph_iterations=1,
-                 canny_sigma=CANNY_SIGMA, canny_low=None, canny_high=None):
+                 choose="central", canny_sigma=CANNY_SIGMA, canny_low=None, canny_high=None):
         import ipywidgets as w
 
         try:
@@ -226,6 +227,8 @@ class TemplateExplorer:
         c["threshold"].add_class(THRESHOLD_CLASS)
         c["morph_kernel"] = slider(w.IntSlider, "morph. kernel (px)", int(morph_kernel), 1, 15, 2)
         c["morph_iterations"] = slider(w.IntSlider, "morph. iterations", int(morph_iterations), 0, 5, 1)
+        c["central"] = w.Checkbox(value=choose == "central", indent=False,
+                                  description="contour at the ROI's centre (else the paper's largest)")
         adaptive = canny_low is None or canny_high is None
         c["adaptive"] = w.Checkbox(value=adaptive, description="adaptive Canny thresholds (eq. 10)",
                                    indent=False)
@@ -251,14 +254,14 @@ class TemplateExplorer:
             heading = [w.HTML("<b>ROI</b>: slide the click point near the probe tip")]
         left = w.VBox([*heading, c["click_x"], c["click_y"], c["roi_size"], c["motion"]])
         middle = w.VBox([w.HTML("<b>Contour template</b>"), c["sigma"], c["otsu"], c["threshold"],
-                         c["morph_kernel"], c["morph_iterations"]])
+                         c["morph_kernel"], c["morph_iterations"], c["central"]])
         right = w.VBox([w.HTML("<b>Canny edges</b>"), c["adaptive"], c["canny_sigma"], c["canny"]])
         self.ui = w.VBox([w.HBox([left, middle, right], layout=w.Layout(flex_flow="row wrap")),
                           self.readout, self.image])
 
         for name in ("click_x", "click_y", "roi_size"):
             c[name].observe(self._on_click, "value")
-        for name in ("sigma", "otsu", "morph_kernel", "morph_iterations", "adaptive", "canny_sigma"):
+        for name in ("sigma", "otsu", "morph_kernel", "morph_iterations", "central", "adaptive", "canny_sigma"):
             c[name].observe(self._on_change, "value")
         c["threshold"].observe(self._on_threshold, "value")
         c["canny"].observe(self._on_canny, "value")
@@ -280,6 +283,7 @@ class TemplateExplorer:
             "threshold": None if c["otsu"].value else float(c["threshold"].value),
             "morph_kernel": int(c["morph_kernel"].value),
             "morph_iterations": int(c["morph_iterations"].value),
+            "choose": "central" if c["central"].value else "largest",
             "canny_sigma": float(c["canny_sigma"].value),
             "canny_low": None if adaptive else float(lo),
             "canny_high": None if adaptive else float(hi),
