@@ -304,3 +304,42 @@ def test_the_p90_is_infinite_exactly_when_the_interpolation_weighs_a_never_found
                        "coverage95": np.nan, "ms_per_frame": 1.0, "error": ""})
     p90 = summarise(df).iloc[0].rmse_over_crb_p90
     assert p90 == expected if math.isinf(expected) else p90 == pytest.approx(expected)
+
+
+# ------------------------------------------------------------------ ablations
+def test_the_ablated_texture_keeps_the_particles_where_they_were():
+    # ABLATED_TEXTURE, not 0: a texture of 0 skips the texture's random draws and every particle moves.
+    from semlab.evaluation.families import ABLATED_TEXTURE
+    from semlab.sim import Clutter
+    from semlab.sim.scene import make_substrate
+
+    def substrate(texture):
+        return make_substrate(160, 120, Clutter(n_static=12, texture=texture), 0.8, np.random.default_rng(5))
+
+    full, ablated, none = substrate(0.03), substrate(ABLATED_TEXTURE), substrate(0.0)
+    assert np.median(np.abs(ablated - 0.2)) < 1e-6 < np.median(np.abs(full - 0.2))  # the texture is gone
+    cores = ablated > 0.2 + 0.25  # where a particle covers the substrate, the texture does not show
+    assert cores.sum() > 20 and np.median(np.abs(full[cores] - ablated[cores])) < 0.005
+    # with no texture at all the particles are elsewhere: mostly bare substrate under the cores
+    assert np.median(np.abs(none[cores] - ablated[cores])) > 0.1
+
+
+def test_a_scene_without_its_texture_or_occluder_is_the_same_scene_otherwise():
+    full = make_family_sequence("clutter", 214)  # a strong texture (4 % of the yield)
+    flat = make_family_sequence("clutter", 214, without=("texture", "occluder"))
+    assert flat.meta["without"] == ["occluder", "texture"] and full.meta["without"] == []
+    assert full.roi == flat.roi and np.allclose(full.truth[["x", "y"]], flat.truth[["x", "y"]])
+    assert flat.truth.visible.all()  # nothing hides the tip
+    # averaged over the frames (the noise gone), the static texture is most of the background's spread
+    corner = (slice(None), slice(0, 60), slice(0, 60))
+    assert np.std(flat.frames[corner].mean(axis=0)) < 0.8 * np.std(full.frames[corner].mean(axis=0))
+
+
+def test_ablations_are_checked_before_anything_runs():
+    with pytest.raises(ValueError, match="unknown part"):
+        make_family_sequence("clutter", 0, without="noise")
+    with pytest.raises(ValueError, match="cannot take out \\['texture'\\]"):
+        semlab.evaluate(families="still,substrates", seeds=[0], trackers="ncc", scheduler="inline",
+                        progress=False, without="texture")
+    with pytest.raises(ValueError, match="it can take out: nothing"):
+        make_family_sequence("semi_real", 0, without="occluder")

@@ -62,6 +62,17 @@ def test_unknown_names_are_one_line_listing_the_valid_ones(args, valid, tmp_path
     assert not (tmp_path / "r.csv").exists()
 
 
+def test_without_takes_the_part_out_and_says_so(tmp_path, capsys):
+    out = tmp_path / "r.csv"
+    code, _, _ = _run(["--families", "clutter", "--seeds", "0", "--trackers", "ncc", "--scheduler", "inline",
+                       "--without", "occluder", "--out", str(out), "--no-progress", "--quiet"], capsys)
+    meta = json.loads((tmp_path / "r.csv.json").read_text())
+    assert code == 0 and meta["without"] == ["occluder"] and meta["sequences"]["clutter/0"]["without"] == ["occluder"]
+    # a part the family cannot take out (its substrate is not the simulator's clutter): refused before any work
+    code, _, err = _run(["--families", "still,substrates", "--without", "texture", "--out", str(out)], capsys)
+    assert code == cli.EXIT_USAGE and "'substrates' cannot take out ['texture']" in err
+
+
 @pytest.mark.parametrize("args", [["--seeds", "5-2"], ["--param", "huber=-1"], ["--trackers", "ncc", "--param", "huber=3"],
                                   ["--seeds", "0", "--split", "dev"]])
 def test_bad_seeds_and_params_are_usage_errors(args, tmp_path, capsys):
@@ -85,11 +96,11 @@ def test_an_interrupted_run_leaves_no_complete_looking_output(tmp_path, capsys, 
     calls = []
     real = runner.evaluate_sequence
 
-    def interrupted(family, seed, factories, per_frame=False):
+    def interrupted(family, seed, factories, per_frame=False, without=()):
         calls.append(seed)
         if len(calls) == 2:
             raise KeyboardInterrupt
-        return real(family, seed, factories, per_frame)
+        return real(family, seed, factories, per_frame, without)
 
     monkeypatch.setattr(runner, "evaluate_sequence", interrupted)
     out = tmp_path / "r.csv"

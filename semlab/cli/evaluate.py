@@ -75,6 +75,8 @@ def _add_evaluate_parser(sub, fmt) -> None:
                    help="trackers (default semlab,ncc,sqdiff,ecc,phasecorr; also 'paper')")
     e.add_argument("--param", type=_param_arg, action="append", default=[], metavar="KEY=VALUE",
                    help="a semlab.Tracker parameter for the 'semlab' tracker (repeatable)")
+    e.add_argument("--without", metavar="PART,...",
+                   help="take parts out of every scene, every other draw kept (an ablation): texture, occluder")
     e.add_argument("--scheduler", metavar="ADDRESS",
                    help="tcp://HOST:PORT of a running dask scheduler, or 'inline' (default: a LocalCluster)")
     e.add_argument("--workers", type=int, metavar="N", help="LocalCluster workers (default: the cores, at most 2)")
@@ -103,13 +105,17 @@ def _cmd_evaluate(args, argv) -> int:
         families = resolve_families(args.families)
         seeds = resolve_seeds(args.seeds, args.split)
         resolve_trackers(args.trackers, params)
+        without = tuple(p for p in (args.without or "").split(",") if p)
+        for family in families:
+            ev.families.check_ablations(family, without)
     except ValueError as e:
         raise _CLIError(EXIT_USAGE, str(e)) from None
     if args.workers is not None and args.workers < 1:
         raise _CLIError(EXIT_USAGE, f"--workers must be >= 1, got {args.workers}")
     try:
         result = ev.evaluate(families, seeds, args.trackers, params=params, scheduler=args.scheduler,
-                             n_workers=args.workers, per_frame=bool(args.per_frame), progress=not args.no_progress)
+                             n_workers=args.workers, per_frame=bool(args.per_frame), progress=not args.no_progress,
+                             without=without)
         df, frames = result if args.per_frame else (result, None)
     except ev.SchedulerUnreachable as e:
         raise _CLIError(EXIT_SCHEDULER, str(e)) from None
@@ -140,6 +146,7 @@ def _cmd_evaluate(args, argv) -> int:
                 "splits": {str(s): ev.split_of(s) for s in seeds},
                 "trackers": list(dict.fromkeys(df["tracker"])),
                 "params": params,
+                "without": list(without),
                 "scheduler": df.attrs.get("scheduler"),
                 "sequences": df.attrs.get("sequences"),
                 "output": {"csv": out.name, "sha256": _sha256(tmp_csv), "columns": list(df.columns), "rows": len(df)},

@@ -16,6 +16,7 @@ real needle by exact Fourier shifts (:mod:`semlab.evaluation.semireal`). Seeds: 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import zlib
 from collections.abc import Callable
@@ -45,6 +46,14 @@ ROI_SIZE = 200
 #: Frames at which the bound is evaluated (evenly spaced, first and last included): the bound
 #: changes along a sequence (the probe over other background, charging, clutter) but slowly.
 CRB_SAMPLES = 4
+#: What ``make_family_sequence(..., without=...)`` can take out of a scene drawn through the
+#: simulator's :class:`~semlab.sim.Clutter`, every other draw kept (an ablation: which part of a
+#: scene makes a tracker fail).
+ABLATIONS = ("texture", "occluder")
+#: The texture's amplitude when it is taken out: not 0, so the substrate still makes the texture's
+#: random draws and every particle, and the noise, stay as drawn (0 skips them).
+ABLATED_TEXTURE = 1e-9
+
 #: Beam blur (px) of ``noise_free`` sequences (the ground-truth tests).
 NOISE_FREE_BLUR_PX = 1.0
 #: The simulator's frame period (s): the paper's 13 frames/s.
@@ -77,12 +86,16 @@ class Family:
     ranges : dict
         Parameter name -> range (:mod:`semlab.evaluation.draws`); every parameter drawn.
     build : callable ``(Draws) -> Sequence``
+    ablations : tuple of str
+        The parts of its scenes ``make_family_sequence(..., without=...)`` can take out
+        (:data:`ABLATIONS`; none where the substrate is not the simulator's clutter).
     """
 
     name: str
     title: str
     ranges: dict
     build: Callable = field(repr=False)
+    ablations: tuple = ABLATIONS
 
 
 # ------------------------------------------------------------------ the simulated rig's draws
@@ -176,6 +189,19 @@ def combine_bounds(per_frame: list[tuple[int, float, float]]) -> tuple[float, fl
     return sx, sy
 
 
+def _ablated(d: Draws, clutter: Clutter, visible, background) -> tuple[Clutter, Callable | None]:
+    """``(clutter, visible)`` with what ``d.without`` names taken out (:data:`ABLATIONS`); each part
+    taken out is added to ``d.ablated``."""
+    without = getattr(d, "without", ())
+    if "texture" in without and background is None:
+        clutter = dataclasses.replace(clutter, texture=min(clutter.texture, ABLATED_TEXTURE))
+        d.ablated.add("texture")
+    if "occluder" in without:
+        clutter, visible = dataclasses.replace(clutter, occluder=False), None
+        d.ablated.add("occluder")
+    return clutter, visible
+
+
 def _simulate(d: Draws, width: int, height: int, path: np.ndarray, *, noise: SEMNoise,
               probe: ProbeGeometry, clutter: Clutter, background=None, visible=None,
               angle_deg=None) -> Sequence:
@@ -188,6 +214,7 @@ def _simulate(d: Draws, width: int, height: int, path: np.ndarray, *, noise: SEM
     pixel_size = d("pixel_size_nm")
     angle = d("probe_angle_deg") if angle_deg is None else angle_deg
     beam_sigma = None  # from the pixel size (semlab.sim.optics)
+    clutter, visible = _ablated(d, clutter, visible, background)
     if getattr(d, "noise_free", False):
         # the ground-truth tests' view: the probe alone, no noise, blurred by 1 px (a sampled
         # centroid then aliases by < 2e-3 px: tests/test_sim_render.py)
@@ -396,10 +423,10 @@ def _family_list():
                        n_frames=Int(50, 50), substrate=Choice(("flat", "fractal", "grains")),
                        texture_strength=Uniform(0.02, 0.12), fractal_beta=Uniform(2.0, 3.5), grain_px=Uniform(6.0, 25.0),
                        scan_line_jitter_px=Uniform(0.1, 0.5), image_drift_px_per_s=Uniform(0.5, 3.0),
-                       speed_px_per_frame=Uniform(0.3, 1.5)), _substrates),
+                       speed_px_per_frame=Uniform(0.3, 1.5)), _substrates, ablations=("occluder",)),
         Family("semi_real", "the real FIB/SEM needle of data/real-sem cut out and moved by exact sub-pixel "
                "Fourier shifts over real backgrounds from other frames, shot noise at several doses",
-               SEMI_REAL_RANGES, _semi_real),
+               SEMI_REAL_RANGES, _semi_real, ablations=()),
     ]
 
 
@@ -408,11 +435,34 @@ FAMILIES: dict[str, Family] = {f.name: f for f in _family_list()}
 FAMILY_NAMES = tuple(FAMILIES)
 
 
-def make_family_sequence(name: str, seed: int, *, noise_free: bool = False) -> Sequence:
+def check_ablations(name: str, without) -> tuple[str, ...]:
+    """``without`` as a tuple, checked against :data:`ABLATIONS` and family ``name``'s own list.
+
+    Raises
+    ------
+    ValueError
+        An unknown part, or one the family cannot take out (the substrate of ``substrates`` and
+        anything of ``semi_real`` are not drawn through the simulator's clutter).
+    """
+    without = (without,) if isinstance(without, str) else tuple(without)
+    unknown = sorted(set(without) - set(ABLATIONS))
+    if unknown:
+        raise ValueError(f"without: unknown part(s) {unknown}; valid: {', '.join(ABLATIONS)}")
+    refused = sorted(set(without) - set(FAMILIES[name].ablations))
+    if refused:
+        raise ValueError(f"family {name!r} cannot take out {refused}: its scenes do not draw them through the "
+                         f"simulator's clutter (it can take out: {', '.join(FAMILIES[name].ablations) or 'nothing'})")
+    return without
+
+
+def make_family_sequence(name: str, seed: int, *, noise_free: bool = False, without=()) -> Sequence:
     """The sequence of family ``name`` for ``seed`` (deterministic).
 
     ``noise_free=True`` (for tests of the ground truth) renders the same probe along the same path
     with no noise, clutter or texture: a flat background, so that the frames show the probe alone.
+    ``without`` takes parts of the scene out (:data:`ABLATIONS`: ``"texture"``, the substrate's
+    texture, whose amplitude becomes :data:`ABLATED_TEXTURE`; ``"occluder"``), every other draw
+    kept: the same probe, path, particles and noise.
 
     Returns
     -------
@@ -425,16 +475,21 @@ def make_family_sequence(name: str, seed: int, *, noise_free: bool = False) -> S
     Raises
     ------
     ValueError
-        Unknown family, or a seed that is not a non-negative integer.
+        Unknown family, a seed that is not a non-negative integer, or a part in ``without`` that
+        is unknown or that the family cannot take out (:func:`check_ablations`).
     """
     if name not in FAMILIES:
         raise ValueError(f"unknown family {name!r}; valid: {', '.join(FAMILY_NAMES)}")
     if isinstance(seed, bool) or int(seed) != seed or seed < 0:
         raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
     seed = int(seed)
+    without = check_ablations(name, without)
     d = Draws(family_rng(name, seed), FAMILIES[name].ranges)
     d.noise_free = bool(noise_free)
+    d.without, d.ablated = frozenset(without), set()
     seq = FAMILIES[name].build(d)
+    if d.ablated != d.without:  # a family's ablations listed but not honoured by its build
+        raise RuntimeError(f"family {name!r} did not take out {sorted(d.without - d.ablated)}")
     seq.meta.update(family=name, seed=seed, split=split_of(seed), n_frames=len(seq.frames), params=d.params,
-                    derived=sorted(d.derived))
+                    derived=sorted(d.derived), without=sorted(d.without))
     return seq

@@ -17,7 +17,14 @@ from collections.abc import Mapping
 
 import pandas as pd
 
-from .families import DEV_SEEDS, FAMILY_NAMES, TEST_SEEDS, make_family_sequence, split_of
+from .families import (
+    DEV_SEEDS,
+    FAMILY_NAMES,
+    TEST_SEEDS,
+    check_ablations,
+    make_family_sequence,
+    split_of,
+)
 from .scoring import COLUMNS, PER_FRAME_COLUMNS, frame_errors, run_tracker, score
 from .trackers import resolve_trackers
 
@@ -97,14 +104,15 @@ def _single_threaded_in_worker():
     cv2.setNumThreads(1)
 
 
-def evaluate_sequence(family: str, seed: int, factories: Mapping, per_frame: bool = False):
+def evaluate_sequence(family: str, seed: int, factories: Mapping, per_frame: bool = False, without=()):
     """Every tracker on one (family, seed): ``(rows, per_frame_errors or None, sequence_meta)``.
 
-    This is the unit of work of :func:`evaluate` (one dask task).
+    This is the unit of work of :func:`evaluate` (one dask task); ``without``: as
+    :func:`~semlab.evaluation.make_family_sequence`'s.
     """
     _single_threaded_in_worker()
     cpu0, wall0 = time.process_time(), time.perf_counter()
-    seq = make_family_sequence(family, seed)
+    seq = make_family_sequence(family, seed, without=without)
     rows, frames = [], []
     for name, factory in factories.items():
         track, ms, error = run_tracker(factory, seq.frames, seq.roi)
@@ -133,9 +141,9 @@ def _progress(iterable, total, enabled):
     return tqdm(iterable, total=total, desc="corpus (family x seed)", unit="seq")
 
 
-def _run_inline(jobs, factories, per_frame, progress):
+def _run_inline(jobs, factories, per_frame, progress, without):
     for family, seed in _progress(jobs, len(jobs), progress):
-        yield (family, seed), evaluate_sequence(family, seed, factories, per_frame)
+        yield (family, seed), evaluate_sequence(family, seed, factories, per_frame, without)
 
 
 def _connect(scheduler, n_workers):
@@ -157,13 +165,14 @@ def _connect(scheduler, n_workers):
     return client, None, f"dask scheduler {scheduler} ({n} workers at start)"
 
 
-def _run_dask(jobs, factories, per_frame, progress, scheduler, n_workers, info):
+def _run_dask(jobs, factories, per_frame, progress, scheduler, n_workers, info, without):
     from distributed import as_completed
 
     client, cluster, description = _connect(scheduler, n_workers)
     info["scheduler"] = description
     try:
-        futures = {client.submit(evaluate_sequence, f, s, factories, per_frame, pure=False): (f, s) for f, s in jobs}
+        futures = {client.submit(evaluate_sequence, f, s, factories, per_frame, without, pure=False): (f, s)
+                   for f, s in jobs}
         try:
             for fut in _progress(as_completed(futures), len(futures), progress):
                 yield futures[fut], fut.result()
@@ -178,7 +187,7 @@ def _run_dask(jobs, factories, per_frame, progress, scheduler, n_workers, info):
 
 def evaluate(families=None, seeds=None, trackers=None, *, split: str | None = None, params: Mapping | None = None,
              scheduler: str | None = None, n_workers: int | None = None, per_frame: bool = False,
-             progress: bool = True):
+             progress: bool = True, without=()):
     """Run trackers on the scene-family corpus; one row per family x seed x tracker.
 
     Parameters
@@ -203,6 +212,9 @@ def evaluate(families=None, seeds=None, trackers=None, *, split: str | None = No
         Also return the per-frame errors.
     progress : bool
         A tqdm bar over the (family, seed) tasks.
+    without : str or sequence of str
+        Parts taken out of every scene, every other draw kept (an ablation:
+        :data:`semlab.evaluation.families.ABLATIONS`, checked against each family before anything runs).
 
     Returns
     -------
@@ -231,12 +243,13 @@ def evaluate(families=None, seeds=None, trackers=None, *, split: str | None = No
     families = resolve_families(families)
     seeds = resolve_seeds(seeds, split)
     factories = resolve_trackers(trackers, params)
+    without = tuple(sorted({part for f in families for part in check_ablations(f, without)}))
     jobs = [(f, s) for f in families for s in seeds]
     info = {"scheduler": "inline (this process)"}
     if scheduler == "inline":
-        results = _run_inline(jobs, factories, per_frame, progress)
+        results = _run_inline(jobs, factories, per_frame, progress, without)
     else:
-        results = _run_dask(jobs, factories, per_frame, progress, scheduler, n_workers, info)
+        results = _run_dask(jobs, factories, per_frame, progress, scheduler, n_workers, info, without)
     rows, frames, sequences = [], [], {}
     for (family, seed), (r, pf, meta) in results:
         rows += r
