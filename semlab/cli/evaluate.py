@@ -105,9 +105,7 @@ def _cmd_evaluate(args, argv) -> int:
         families = resolve_families(args.families)
         seeds = resolve_seeds(args.seeds, args.split)
         resolve_trackers(args.trackers, params)
-        without = tuple(p for p in (args.without or "").split(",") if p)
-        for family in families:
-            ev.families.check_ablations(family, without)
+        without = ev.families.check_ablations(families, [p for p in (args.without or "").split(",") if p])
     except ValueError as e:
         raise _CLIError(EXIT_USAGE, str(e)) from None
     if args.workers is not None and args.workers < 1:

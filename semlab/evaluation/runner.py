@@ -243,7 +243,7 @@ def evaluate(families=None, seeds=None, trackers=None, *, split: str | None = No
     families = resolve_families(families)
     seeds = resolve_seeds(seeds, split)
     factories = resolve_trackers(trackers, params)
-    without = tuple(sorted({part for f in families for part in check_ablations(f, without)}))
+    without = check_ablations(families, without)
     jobs = [(f, s) for f in families for s in seeds]
     info = {"scheduler": "inline (this process)"}
     if scheduler == "inline":
