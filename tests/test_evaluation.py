@@ -22,7 +22,7 @@ from semlab.evaluation import (
     summary_markdown,
 )
 from semlab.evaluation.runner import parse_seeds, resolve_families, resolve_seeds
-from semlab.evaluation.scoring import LOST_PX, SILENT_PX, run_tracker, score
+from semlab.evaluation.scoring import LOST_PX, SILENT_PX, frame_errors, run_tracker, score
 from semlab.evaluation.semireal import NEEDLE_FRAMES, needle_layer
 from semlab.evaluation.trackers import resolve_trackers
 from semlab.sim.composite import composite
@@ -202,6 +202,34 @@ def test_coverage_counts_frames_inside_their_own_95_percent_ellipse():
     ex = np.array([0.0, 1.0, 2.0, 2.4, 2.5, 3.0])
     r = score(_errors(ex, np.zeros(6), np.ones(6, bool), sx=1.0, sy=1.0), (0.1, 0.1), 1.0)
     assert r["coverage95"] == pytest.approx(3 / 5)
+
+
+def test_bias_is_the_error_every_frame_shares_and_held_the_motion_not_followed():
+    rng = np.random.default_rng(3)
+    tx, ty = np.cumsum(rng.normal(0, 1.0, 30)), np.cumsum(rng.normal(0, 1.0, 30))
+    tx, ty = tx - tx[0], ty - ty[0]
+    errors = _errors(np.zeros(30), np.zeros(30), np.ones(30, bool)).assign(true_dx=tx, true_dy=ty)
+    # an origin 0.5 px off: every frame off by it, the motion followed
+    r = score(errors.assign(ex=0.3, ey=-0.4), (0.1, 0.1), 1.0)
+    assert r["bias_px"] == pytest.approx(0.5) and r["held_fraction"] == pytest.approx(0.0, abs=1e-12)
+    # a track that follows 40 % of the motion (held at 60 %), plus the same offset
+    r = score(errors.assign(ex=0.3 - 0.6 * tx, ey=-0.4 - 0.6 * ty), (0.1, 0.1), 1.0)
+    assert r["held_fraction"] == pytest.approx(0.6)
+    # a track that stays where it started: held 1
+    assert score(errors.assign(ex=-tx, ey=-ty), (0.1, 0.1), 1.0)["held_fraction"] == pytest.approx(1.0)
+    # a still probe (no motion to follow) or no truth: no held fraction
+    still = errors.assign(true_dx=0.01 * tx, true_dy=0.01 * ty, ex=-tx * 0.01)
+    assert math.isnan(score(still, (0.1, 0.1), 1.0)["held_fraction"])
+    assert math.isnan(score(errors.drop(columns=["true_dx", "true_dy"]), (0.1, 0.1), 1.0)["held_fraction"])
+
+
+def test_frame_errors_carry_the_true_displacement():
+    truth = pd.DataFrame({"frame": [0, 1, 2], "x": [10.0, 12.0, 9.0], "y": [5.0, 5.5, 4.0]})
+    track = pd.DataFrame({"frame": [0, 1, 2], "x": [7.5, 9.5, 6.5], "y": [7.5, 8.0, 6.5], "ok": True,
+                          "sigma_x": 0.1, "sigma_y": 0.1})
+    e = frame_errors(track, truth, (0, 0, 16, 16))
+    assert e["true_dx"].tolist() == [0.0, 2.0, -1.0] and e["true_dy"].tolist() == [0.0, 0.5, -1.0]
+    assert np.allclose(e[["ex", "ey"]].to_numpy(), 0.0)
 
 
 class _Refuses:

@@ -29,7 +29,8 @@ EVALUATE_DESCRIPTION = """\
 Run trackers on the scene-family corpus (semlab.evaluation) and write one CSV row per family x seed
 x tracker: family, seed, split, tracker, rmse_px, crb_px, lost_fraction, silent_fraction,
 ms_per_frame, and more (n_frames, rmse_over_crb, std_px, std_over_crb, median/p90/max_err_px,
-flagged_fraction, coverage95, crb_x_px, crb_y_px, n_visible, error). Prints the summary per family
+flagged_fraction, coverage95, crb_x_px, crb_y_px, n_visible, bias_px: the error every frame shares,
+held_fraction: the share of the probe's own motion not followed, error). Prints the summary per family
 (median, p90 and worst RMSE / Cramer-Rao bound, lost and silent rates, ms/frame) with the trackers
 side by side.
 

@@ -17,7 +17,14 @@ origin of both the track and the truth and is left out of every statistic):
 - ``coverage95``: of the visible frames with ``ok`` and a reported ``sigma_x, sigma_y`` (read
   from the tracker's results when they have them), those inside their own 95 % ellipse
   ``(ex/σx)² + (ey/σy)² <= χ²₂(0.95)``; NaN when the tracker reports no sigmas;
-- ``ms_per_frame``: mean wall time of ``update`` (frame 0's ``init`` excluded).
+- ``ms_per_frame``: mean wall time of ``update`` (frame 0's ``init`` excluded);
+- ``bias_px``: ``|mean(e)|`` over the frames of ``rmse_px``, the part of the error every frame
+  shares (an origin off by that much: frame 0's own registration);
+- ``held_fraction``: ``h`` of the least-squares fit ``e = b − h·t`` over the same frames, ``t`` the
+  probe's true displacement: the fraction of its own motion the track did not follow (0: followed,
+  1: held where it started, by something that does not move with the probe), apart from a constant
+  ``b``; NaN when the probe moved less than :data:`HELD_MIN_MOTION_PX` (rms about its mean) or the
+  truth is not known.
 """
 
 from __future__ import annotations
@@ -31,12 +38,15 @@ from scipy.stats import chi2
 
 from semlab.metrics import tracking_errors
 
-__all__ = ["COLUMNS", "LOST_PX", "PER_FRAME_COLUMNS", "SILENT_PX", "run_tracker", "score"]
+__all__ = ["COLUMNS", "HELD_MIN_MOTION_PX", "LOST_PX", "PER_FRAME_COLUMNS", "SILENT_PX", "frame_errors", "held_fraction",
+           "run_tracker", "score"]
 
 #: An error above this many px counts as lost (the issue's loss criterion).
 LOST_PX = 2.0
 #: An ok frame further off than this is a silent error.
 SILENT_PX = 1.0
+#: ``held_fraction`` needs the probe to move at least this much (px, rms about its mean position).
+HELD_MIN_MOTION_PX = 1.0
 #: 95 % quantile of the chi-square distribution with 2 degrees of freedom (a 2-D error ellipse).
 CHI2_95_2D = float(chi2.ppf(0.95, 2))
 
@@ -44,7 +54,7 @@ CHI2_95_2D = float(chi2.ppf(0.95, 2))
 COLUMNS = ["family", "seed", "split", "tracker", "rmse_px", "crb_px", "lost_fraction", "silent_fraction",
            "ms_per_frame", "n_frames", "rmse_over_crb", "std_px", "std_over_crb", "median_err_px",
            "p90_err_px", "max_err_px", "flagged_fraction", "coverage95", "crb_x_px", "crb_y_px",
-           "n_visible", "error"]
+           "n_visible", "bias_px", "held_fraction", "error"]
 PER_FRAME_COLUMNS = ["family", "seed", "tracker", "frame", "ex", "ey", "ok", "sigma_x", "sigma_y", "visible"]
 
 
@@ -98,13 +108,31 @@ def run_tracker(factory, frames, roi) -> tuple[pd.DataFrame, float, str]:
 
 
 def frame_errors(track: pd.DataFrame, truth: pd.DataFrame, roi) -> pd.DataFrame:
-    """``frame, ex, ey, ok, sigma_x, sigma_y, visible`` of one run (:func:`semlab.metrics.tracking_errors`)."""
+    """``frame, ex, ey, ok, sigma_x, sigma_y, visible, true_dx, true_dy`` of one run
+    (:func:`semlab.metrics.tracking_errors`; ``true_dx, true_dy``: the truth's displacement from frame 0)."""
     e = tracking_errors(track[["frame", "x", "y", "ok"]], truth, roi)
     out = e[["frame", "ex", "ey", "ok"]].copy()
     out["sigma_x"] = track["sigma_x"].to_numpy(float)
     out["sigma_y"] = track["sigma_y"].to_numpy(float)
     out["visible"] = e["visible"].to_numpy(bool)
+    true = truth.set_index("frame").loc[out["frame"], ["x", "y"]].to_numpy(float)
+    first = truth.set_index("frame").loc[0, ["x", "y"]].to_numpy(float)
+    out["true_dx"], out["true_dy"] = true[:, 0] - first[0], true[:, 1] - first[1]
     return out
+
+
+def held_fraction(ex, ey, tx, ty) -> float:
+    """``h`` of the least-squares fit ``e = b − h·t`` (``b`` a constant 2-vector): the fraction of
+    the true displacement ``t`` the track did not follow; NaN when ``t`` spreads less than
+    :data:`HELD_MIN_MOTION_PX` (rms about its mean)."""
+    ex, ey, tx, ty = (np.asarray(v, float) for v in (ex, ey, tx, ty))
+    if ex.size < 2:
+        return float("nan")
+    cx, cy = tx - tx.mean(), ty - ty.mean()
+    spread = float(np.sum(cx * cx + cy * cy))
+    if spread < ex.size * HELD_MIN_MOTION_PX**2:
+        return float("nan")
+    return float(-np.sum((ex - ex.mean()) * cx + (ey - ey.mean()) * cy) / spread)
 
 
 def score(errors: pd.DataFrame, crb, ms_per_frame: float) -> dict:
@@ -150,4 +178,7 @@ def score(errors: pd.DataFrame, crb, ms_per_frame: float) -> dict:
         "crb_x_px": crb_x,
         "crb_y_px": crb_y,
         "n_visible": n_vis,
+        "bias_px": float(math.hypot(np.mean(ex_u), np.mean(ey_u))) if eu.size else nan,
+        "held_fraction": (held_fraction(ex_u, ey_u, e["true_dx"].to_numpy(float)[used],
+                                        e["true_dy"].to_numpy(float)[used]) if "true_dx" in e else nan),
     }
