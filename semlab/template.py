@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
+from skimage.filters import threshold_multiotsu
 
 from .roi import as_gray_float
 
@@ -22,6 +23,11 @@ CONTOUR_CHOICES = ("largest", "central")
 #: ``"central"`` weighs only contours of at least this fraction of the largest's area: smaller ones
 #: are specks of noise or clutter left by the opening, not the object, even when nearer the centre.
 MIN_CENTRAL_AREA_FRACTION = 0.1
+#: A probe whose end is at the ROI's centre lies behind it: its region covers at most about half the
+#: ROI. With ``"central"`` and Otsu's threshold, a region over more than this holds part of the
+#: substrate too (a bright surface the probe reaches over, merged with it at Otsu's level), and the
+#: brightest of three Otsu classes is taken instead (:func:`skimage.filters.threshold_multiotsu`).
+MAX_CENTRAL_REGION_FRACTION = 0.5
 
 
 @dataclass
@@ -47,6 +53,9 @@ class ContourTemplate:
         The threshold used on the smoothed image (Otsu's unless given), gray levels 0-255.
     area : float
         Area enclosed by the template contour, px².
+    otsu_classes : int or None
+        How the threshold was found: 2 (Otsu's), 3 (the brightest of three Otsu classes: see
+        :func:`identify_contour_template`'s ``choose``), None (given).
     """
 
     points: np.ndarray
@@ -59,6 +68,7 @@ class ContourTemplate:
     morphed: np.ndarray = field(repr=False)
     threshold: float = 0.0
     area: float = 0.0
+    otsu_classes: int | None = None
 
     @property
     def length(self) -> int:
@@ -104,7 +114,11 @@ def identify_contour_template(image, *, sigma: float = 2.0, threshold: float | N
         departs from it: among the contours of at least :data:`MIN_CENTRAL_AREA_FRACTION` of the
         largest's area, the one that holds the ROI's centre (the tip the user clicked), else the one
         nearest to it; the largest contour of an ROI centred on a tip can be a bright blob of the
-        substrate beside it, and a tracker that follows the blob says ``ok`` on every frame.
+        substrate beside it, and a tracker that follows the blob says ``ok`` on every frame. With
+        Otsu's threshold, a central region over :data:`MAX_CENTRAL_REGION_FRACTION` of the ROI is
+        the probe merged with a bright part of the substrate (a probe ending at the centre lies
+        behind it): the brightest of three Otsu classes (Liao et al. 2001) separates them, and its
+        central contour is taken when it has one.
 
     Returns
     -------
@@ -133,12 +147,26 @@ def identify_contour_template(image, *, sigma: float = 2.0, threshold: float | N
     if int(gray.max()) == int(gray.min()):
         raise ValueError("the ROI is constant: there is no object to take a contour from")
     smoothed = cv2.GaussianBlur(gray, (0, 0), sigma) if sigma > 0 else gray.copy()
+    if threshold is not None and not np.isfinite(threshold):
+        raise ValueError(f"threshold must be finite, got {threshold}")
+    found = _segment(smoothed, threshold, bright_object, morph_kernel, morph_iterations, choose)
+    if threshold is None:
+        found.otsu_classes = 2
+    if threshold is None and choose == "central" and found.region.mean() > MAX_CENTRAL_REGION_FRACTION:
+        found = _brightest_of_three(smoothed, bright_object, morph_kernel, morph_iterations) or found
+    if found.area < 4.0:
+        raise ValueError(f"the {choose} contour in the ROI encloses less than 4 px²: no usable template")
+    return found
+
+
+def _segment(smoothed, threshold, bright_object: bool, morph_kernel: int, morph_iterations: int,
+             choose: str) -> ContourTemplate:
+    """Steps 3-5 of :func:`identify_contour_template` on the smoothed ROI (Otsu's threshold when
+    ``threshold`` is None)."""
     mode = cv2.THRESH_BINARY if bright_object else cv2.THRESH_BINARY_INV
     if threshold is None:
         t, binary = cv2.threshold(smoothed, 0, 255, mode | cv2.THRESH_OTSU)
     else:
-        if not np.isfinite(threshold):
-            raise ValueError(f"threshold must be finite, got {threshold}")
         t, binary = cv2.threshold(smoothed, float(threshold), 255, mode)
     morphed = binary
     if morph_kernel > 1 and morph_iterations > 0:
@@ -151,17 +179,30 @@ def identify_contour_template(image, *, sigma: float = 2.0, threshold: float | N
                          f"(threshold {t:.1f}); adjust sigma/threshold or move the ROI")
     hierarchy = hierarchy.reshape(-1, 4)
     external = [i for i in range(len(contours)) if hierarchy[i, 3] < 0]
-    best = _chosen_contour(contours, external, gray.shape, choose)
-    area = float(cv2.contourArea(contours[best]))
-    if area < 4.0:
-        raise ValueError(f"the {choose} contour in the ROI encloses less than 4 px²: no usable template")
-    mask = np.zeros(gray.shape, np.uint8)
+    best = _chosen_contour(contours, external, smoothed.shape, choose)
+    mask = np.zeros(smoothed.shape, np.uint8)
     cv2.drawContours(mask, contours, best, 1, thickness=1)
-    region = np.zeros(gray.shape, np.uint8)
+    region = np.zeros(smoothed.shape, np.uint8)
     cv2.drawContours(region, contours, best, 1, thickness=cv2.FILLED)
     return ContourTemplate(points=contours[best].reshape(-1, 2), mask=mask.astype(bool),
                            region=region.astype(bool), hierarchy=hierarchy, contours=list(contours),
-                           smoothed=smoothed, binary=binary, morphed=morphed, threshold=float(t), area=area)
+                           smoothed=smoothed, binary=binary, morphed=morphed, threshold=float(t),
+                           area=float(cv2.contourArea(contours[best])))
+
+
+def _brightest_of_three(smoothed, bright_object: bool, morph_kernel: int,
+                        morph_iterations: int) -> ContourTemplate | None:
+    """The central contour at the level between the brightest of three Otsu classes and the rest
+    (the darkest's, for a dark object); None when there are no three levels or no contour of at
+    least 4 px² at that level."""
+    try:
+        low, high = threshold_multiotsu(smoothed, classes=3)
+        found = _segment(smoothed, float(high if bright_object else low), bright_object, morph_kernel,
+                         morph_iterations, "central")
+    except ValueError:
+        return None
+    found.otsu_classes = 3
+    return found if found.area >= 4.0 else None
 
 
 def _chosen_contour(contours, external, shape, choose: str) -> int:

@@ -172,6 +172,35 @@ def test_central_passes_over_specks_under_a_tenth_of_the_largest():
     assert holds(central, (40, 45)) and not holds(central, (55, 45))
 
 
+def probe_over_substrate(shape=(90, 110)):
+    """A bright probe (210) from the left border to the centre over a substrate (130), a dark
+    trench (40) in front of its tip: at Otsu's level the probe and the substrate are one region."""
+    img = np.full(shape, 130, np.uint8)
+    img[25:65, 62:] = 40
+    cv2.fillPoly(img, [np.array([[0, 36], [54, 44], [0, 52]], np.int32)], 210)
+    return img
+
+
+def test_central_tells_a_probe_from_the_brighter_substrate_it_reaches_over():
+    img = probe_over_substrate()
+    merged = identify_contour_template(img)  # the paper's: Otsu's level, the largest contour
+    assert merged.region.mean() > 0.5 and holds(merged, (30, 10))  # the substrate is part of it
+    check(merged, reference(img))
+    central = identify_contour_template(img, choose="central")
+    assert central.region.mean() < 0.1 and holds(central, (50, 44)) and not holds(central, (30, 10))
+    assert 130 <= central.threshold < 210  # between the substrate and the probe: the brightest class
+    assert (central.otsu_classes, merged.otsu_classes) == (3, 2)
+    # a threshold the user gives is the user's, the region whatever it holds
+    given = identify_contour_template(img, choose="central", threshold=merged.threshold)
+    assert given.region.mean() > 0.5 and given.otsu_classes is None
+
+
+def test_central_keeps_otsus_level_when_the_region_is_a_probe():
+    img = needle_and_blob(tip=(56, 45))
+    assert (identify_contour_template(img, choose="central").threshold
+            == identify_contour_template(img).threshold)
+
+
 def test_an_unknown_choice_is_refused():
     with pytest.raises(ValueError, match="choose must be one of"):
         identify_contour_template(needle_and_blob(), choose="nearest")

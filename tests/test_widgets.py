@@ -480,3 +480,20 @@ def test_the_central_checkbox_picks_the_probe_over_a_larger_blob_as_the_tracker_
     tracker = Tracker()
     tracker.init(frame, roi)
     assert tracker.contour.area == pytest.approx(central)
+
+
+def test_the_explorer_says_when_the_brightest_of_three_classes_was_taken():
+    from semlab.tracking import Tracker
+
+    # A probe ending at the ROI's centre over a brighter substrate (a dark trench in front of it): at
+    # Otsu's level they are one region over most of the ROI; the explorer shows, as the tracker takes,
+    # the probe alone at the level of the brightest of three classes, and says so.
+    frame = np.full((150, 200), 130, np.float32)
+    frame[40:110, 100:] = 40
+    cv2.fillPoly(frame, [np.array([[0, 62], [90, 75], [0, 88]], np.int32)], 210)
+    roi = (15, 0, 150, 150)  # centre (89.5, 74.5): 0.5 px inside the tip
+    explorer = TemplateExplorer(frame, roi)
+    assert explorer.result["template"].otsu_classes == 3 and "brightest of 3 classes" in explorer.readout.value
+    tracker = Tracker()
+    tracker.init(frame, roi)
+    assert tracker.contour.area == pytest.approx(explorer.result["area_px"]) and tracker.contour.region.mean() < 0.2

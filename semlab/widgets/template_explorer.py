@@ -85,7 +85,10 @@ def _readout_html(r, pixel_size_nm, frame_label=None):
     s = pixel_size_nm
     parts = [f"<b>ROI</b> {r['roi']}"] + ([f"<b>on</b> {html.escape(frame_label)}"] if frame_label else [])
     th = f"{r['threshold']:.0f}" if np.isfinite(r["threshold"]) else "?"
-    parts.append(f"<b>threshold</b> {th} ({'Otsu' if r['otsu'] else 'manual'})")
+    t = r["template"]
+    how = "manual" if not r["otsu"] else ("Otsu, the brightest of 3 classes" if t is not None and t.otsu_classes == 3
+                                          else "Otsu")
+    parts.append(f"<b>threshold</b> {th} ({how})")
     if r["ok"]:
         area = f"<b>contour area</b> {r['area_px']:.0f} px²"
         length = f"<b>length</b> {r['length_px']} px"
