@@ -391,16 +391,16 @@ def _claims_08(r):
     assert r["seeds"] in ([0], [0, 1]) and r["n_families"] == 11
     sem, peer, silent = r["semlab_rmse_over_crb"], r["best_peer_rmse_over_crb"], r["semlab_silent"]
     ahead = ["moves_200px", "wander", "jumps", "gray_charging", "clutter", "shapes", "substrates", "semi_real"]
-    # "On 8 of the 11 families in the full run (...) semlab's median RMSE is below every peer's: 2.2-22x the bound
-    # where the best peer is 17-1,400x. On seed 0 it is 9 (1.3-18x against 2.8-960x): there also the two low-dose
-    # families, on the few frames it reports, and not the semi-real needle"
+    # "On 8 of the 11 families in the full run (...) semlab's median RMSE is below every peer's: 2.2-7.4x the bound
+    # where the best peer is 17-1,400x. On seed 0 it is 10 (1.3-18x against 2.8-960x): there also the two low-dose
+    # families, on the few frames it reports"
     if full:
         assert r["semlab_ahead"] == ahead and r["semlab_behind"] == ["still", "low_dose", "thin_low_dose"]
-        lo, hi, peer_lo, peer_hi = 2.15, 22.5, 16.5, 1400.0
+        lo, hi, peer_lo, peer_hi = 2.15, 7.45, 16.5, 1400.0
     else:
         ahead = ["moves_200px", "wander", "jumps", "low_dose", "gray_charging", "clutter", "thin_low_dose", "shapes",
-                 "substrates"]
-        assert r["semlab_ahead"] == ahead and r["semlab_behind"] == ["still", "semi_real"]
+                 "substrates", "semi_real"]
+        assert r["semlab_ahead"] == ahead and r["semlab_behind"] == ["still"]
         lo, hi, peer_lo, peer_hi = 1.25, 18.5, 2.7, 965.0
     assert lo <= min(sem[f] for f in ahead) and max(sem[f] for f in ahead) <= hi
     assert peer_lo <= min(peer[f] for f in ahead) and max(peer[f] for f in ahead) <= peer_hi
@@ -422,30 +422,33 @@ def _claims_08(r):
         assert (r["best_peer"]["low_dose"], round(peer["low_dose"], 1)) == ("ecc", 4.7)
     assert 0.455 <= r["best_peer_silent"]["low_dose"] <= 0.725
     # "On the thin needle at low dose it flags 91 % of the frames (82 %) and is silent on 8 % (15 %). On the
-    # semi-real needle semlab is just ahead of the best peer, at 22x the bound where ECC is at 24x (41x against NCC's
-    # 39x on seed 0), flagging 23 % of its frames (46 %); it is still silent on 23 % (46 %)"
+    # semi-real needle semlab is at 7.0x the bound where ECC is at 24x (10x against NCC's 39x on seed 0), flagging
+    # 49 % of its frames (97 %) and silent on 1.3 % (2.6 %)"
     # Within a frame (of 39 a seed): whether a frame at the 0.35-px sigma limit on this low-dose needle is flagged
     # follows the CPU's float32 rounding (OpenCV's SIMD path): 31 or 32 frames of seed 0 on two machines.
     assert abs(r["semlab_flagged"]["thin_low_dose"] - (0.91 if full else 0.82)) <= 0.03
     assert round(silent["thin_low_dose"], 2) == (0.08 if full else 0.15)
-    assert round(r["semlab_flagged"]["semi_real"], 2) == (0.23 if full else 0.46)
-    assert round(silent["semi_real"], 2) == (0.23 if full else 0.46)
-    assert round(sem["semi_real"]) == (22 if full else 41) and round(peer["semi_real"]) == (24 if full else 39)
+    # Within a frame (of 39 a seed), as the thin needle's: seed 0's frames sit at the 0.35-px sigma limit.
+    assert abs(r["semlab_flagged"]["semi_real"] - (0.49 if full else 0.97)) <= 0.03
+    assert 0.0 <= silent["semi_real"] <= 0.03 + (0.0 if full else 0.02)
+    assert round(sem["semi_real"]) == (7 if full else 10) and round(peer["semi_real"]) == (24 if full else 39)
     assert r["best_peer"]["semi_real"] == ("ecc" if full else "ncc")
     # "semlab reports no frame more than 1 px off as ok on the still probe, the 200-px moves, wander, jumps, low
     # dose, gray-level charging and shapes in both runs; issue 14's <= 0.5 % holds on 7 of the 11 families (9 on
     # seed 0). It does not on clutter and substrates in the full run (25.5 % and 3 %, from seed 1), ..."
     assert all(silent[f] == 0 for f in ("still", "moves_200px", "wander", "jumps", "low_dose", "gray_charging",
                                          "shapes"))
-    assert sum(v <= 0.005 for v in silent.values()) == (7 if full else 9)
+    assert sum(v <= 0.005 for f, v in silent.items() if f != "semi_real") == (7 if full else 9)
     if full:
         assert (round(silent["clutter"], 3), round(silent["substrates"], 2)) == (0.255, 0.03)
     # "coverage95 ... is 0.86-1 on every family but the semi-real needle and the thin needle at low dose (and clutter
-    # in the full run), where it is 0.6 or less and semlab is silent on 8-46 % of its frames"
+    # in the full run), where it is 0.6 or less ... (the thin needle and clutter are silent on 8-26 % of their
+    # frames, the semi-real needle on 1-3 %)"
     cov = r["coverage95"]
     low = [f for f in cov if cov[f] < 0.86]
-    assert sorted(low) == sorted(["semi_real", "thin_low_dose"] + (["clutter"] if full else []))
-    assert max(cov[f] for f in low) <= 0.6 and all(0.075 <= silent[f] <= 0.465 for f in low)
+    # (seed 0's semi-real needle has one ok frame: flagged too, it has no coverage, and no entry)
+    assert sorted(low) == sorted(f for f in ["semi_real", "thin_low_dose"] + (["clutter"] if full else []) if f in cov)
+    assert max(cov[f] for f in low) <= 0.6 and all(0.075 <= silent[f] <= 0.26 for f in low if f != "semi_real")
     # "No run was cut short by a tracker error."
     assert r["n_errors"] == 0
 
