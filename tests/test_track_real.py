@@ -29,6 +29,13 @@ def _shared() -> Path | None:
 SHARED = _shared()
 pytestmark = pytest.mark.skipif(SHARED is None, reason="../shared/real-sem (the real FIB/SEM frames) is not beside the repo")
 ROI = (400, 150, 200, 200)  # 200x200 around the needle's tip corner in frame 0
+#: Notebook 07's ROI: 200x200 around where an operator clicks near the tip. At contact (frame 5) the
+#: window's registration fails and a whole-frame search finds a poor match of the trench's texture,
+#: which must lose to the re-acquisition of the needle in the window.
+CLICK_ROI = (380, 170, 200, 200)
+#: A frame-to-frame step (px) after contact beyond which the tracker has locked onto something else:
+#: the approach's largest step (9.7 px) plus the rigid model's misfit of the bending needle (2 px).
+FALSE_LOCK_STEP_PX = 12.0
 
 
 @pytest.fixture(scope="module")
@@ -44,9 +51,9 @@ def reference():
     return pd.read_csv(Path(__file__).parent / "data" / "track_contact_consensus.csv", comment="#")
 
 
-def _run(frames):
+def _run(frames, roi=ROI):
     t = Tracker()
-    first = t.init(frames[0], ROI)
+    first = t.init(frames[0], roi)
     rows = [(0, 0.0, 0.0, True)]
     for k in range(1, len(frames)):
         r = t.update(frames[k])
@@ -64,14 +71,17 @@ def test_needle_followed_while_it_approaches(frames, reference):
         assert err <= 1.5, f"frame {k}: {err:.2f} px from the consensus"
 
 
-def test_needle_followed_through_contact(frames, reference):
+@pytest.mark.parametrize("roi", [ROI, CLICK_ROI], ids=["tip-corner", "click"])
+def test_needle_followed_through_contact(frames, reference, roi):
     # The issue's full requirement: no loss flag in all 11 frames, and frame 5 (contact) within
     # 1.5 px of the consensus. From frame 6 the brightness jumps and the needle, now touching the
-    # lamella, is lifted: it keeps moving, but by less than its approach steps (< 10 px per frame),
-    # so a jump beyond that between frames would be a false lock, not the needle.
-    res = _run(frames).set_index("frame")
+    # lamella, is lifted: it keeps moving, by about its approach steps (at most 9.7 px per frame) give or
+    # take the rigid model's misfit once it bends (up to 3 px, tests/data/track_contact_consensus.csv),
+    # so a step beyond FALSE_LOCK_STEP_PX between frames would be a false lock, not the needle (the
+    # false lock this guards against jumped 43 px).
+    res = _run(frames, roi).set_index("frame")
     assert res["ok"].all(), f"frames flagged lost: {res.index[~res['ok']].tolist()}"
     ref = reference.set_index("frame")
     assert np.hypot(res.loc[5, "dx"] - ref.loc[5, "dx"], res.loc[5, "dy"] - ref.loc[5, "dy"]) <= 1.5
     steps = np.hypot(np.diff(res["dx"].to_numpy()), np.diff(res["dy"].to_numpy()))
-    assert steps[5:].max() < 10.0, f"frame-to-frame steps after contact: {np.round(steps[5:], 2)}"
+    assert steps[5:].max() < FALSE_LOCK_STEP_PX, f"frame-to-frame steps after contact: {np.round(steps[5:], 2)}"

@@ -330,6 +330,7 @@ class Tracker:
         predicted = method.predict(motion)
         window = search_window(self.roi, self.options.search.search_size, predicted, arr.shape, whole=motion.lost)
         found = None if motion.lost else method.follow(arr, predicted, motion)
+        widened = False
         if not method.good(found):
             found = method.search(arr, window, predicted, found)
             if method.widens_search and not motion.lost and not method.acceptable(found):
@@ -337,10 +338,13 @@ class Tracker:
                 # two frames): the whole frame before giving up, rather than a lost frame.
                 whole = search_window(self.roi, self.options.search.search_size, predicted, arr.shape, whole=True)
                 if whole != window:
-                    found = method.search(arr, whole, predicted, found)
-        if not motion.lost and not method.acceptable(found):
+                    found, widened = method.search(arr, whole, predicted, found), True
+        # A match from the whole frame that is poorer than the track's typical one competes with the
+        # re-acquisition in the window: a whole frame holds many such matches of texture that is not
+        # the object (the real needle at contact, where its gray levels jump).
+        if not motion.lost and (not method.acceptable(found) or (widened and not method.good(found))):
             verdict = method.reacquire(arr, window, predicted)
-            if verdict is not None:
+            if verdict is not None and (not method.acceptable(found) or verdict.score > found.score):
                 return self._conclude(arr, verdict, predicted)
         return self._conclude(arr, method.verdict(arr, found, predicted), predicted)
 
