@@ -211,7 +211,7 @@ class ICMethod(Method):
         parts = self._band_residuals(found)
         cov = np.full((2, 2), np.inf) if cov is None else self._no_less_than_clustered(cov, parts)
         moved = float(np.hypot(*(np.asarray(verdict.shift, float) - self.origin)))
-        return Uncertainty(position_sigma(cov, self.origin_cov, model_sd=model_error(moved)),
+        return Uncertainty(position_sigma(cov, self.origin_cov, model_sd=model_error(moved, found.gain, found.score)),
                            position_sigma(cov, self.origin_cov), self._influence(found, parts))
 
     def _band_residuals(self, fit):
