@@ -67,8 +67,8 @@ MODEL_ERROR_PER_MISFIT_PX = 2.0
 #: A clean scene's match score: the median on the development seeds of the families without
 #: appearance change is 0.94-0.95.
 TYPICAL_MATCH_SCORE = 0.95
-#: The model error reaches :data:`MODEL_ERROR_PX` once the object has moved this far (px) from where
-#: frame 0 saw it (it grows from 0, the origin, over about the edge's width).
+#: The model error (:func:`model_error`) reaches its full size once the object has moved this far
+#: (px) from where frame 0 saw it (it grows from 0, the origin, over about the edge's width).
 MODEL_ERROR_REACH_PX = 1.0
 
 
