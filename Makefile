@@ -1,7 +1,8 @@
 # semlab: one entry point for setting up, running the workbench and testing.
 #   make lab    - create .venv, install semlab with its extras, register the kernel, start JupyterLab
 #   make test   - same set-up, then the whole test suite (notebooks and the browser test included)
-# Second runs reinstall nothing unless pyproject.toml changed.
+# Second runs reinstall nothing unless pyproject.toml or etc/constraints.txt changed. Releases are those of
+# etc/constraints.txt (the ones CI last passed with); make constraints renews it from the .venv.
 
 PYTHON ?= $(shell command -v python3.11 2>/dev/null || command -v python3)
 VENV   := .venv
@@ -13,7 +14,7 @@ ROOT_FLAG := $(shell [ "$$(id -u)" = 0 ] && echo --allow-root)
 # Two test workers (pytest-xdist): the suite is CPU-bound and the machines have 2 cores.
 PYTEST_ARGS ?= -n 2
 
-.PHONY: setup lab test test-fast bench bench-servo bench-corpus bench-all chromium strip lint clean mutate
+.PHONY: constraints setup lab test test-fast bench bench-servo bench-corpus bench-all chromium strip lint clean mutate
 
 setup: $(STAMP)
 
@@ -21,9 +22,9 @@ setup: $(STAMP)
 # default is not to), so a saved notebook reopens with its widgets, not "Error displaying widget: model not found".
 LAB_OVERRIDES := $(VENV)/share/jupyter/lab/settings/overrides.d
 
-$(STAMP): pyproject.toml etc/jupyterlab/semlab.json
+$(STAMP): pyproject.toml etc/constraints.txt etc/jupyterlab/semlab.json
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --disable-pip-version-check -e '.[dev,fibsem]'
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check -c etc/constraints.txt -e '.[dev,fibsem]'
 	$(BIN)/python -m ipykernel install --sys-prefix --name python3 --display-name "Python 3 (semlab)" >/dev/null
 	@mkdir -p $(LAB_OVERRIDES) && cp etc/jupyterlab/semlab.json $(LAB_OVERRIDES)/semlab.json
 	@touch $(STAMP)
@@ -71,6 +72,12 @@ mutate: $(STAMP)
 
 strip: $(STAMP)
 	$(BIN)/nbstripout --keep-id notebooks/*.ipynb
+
+# The .venv's releases become the constraints make setup installs with (run after a green make test on
+# newer releases; the file's first three lines, its comment, are kept).
+constraints: $(STAMP)
+	@{ head -3 etc/constraints.txt; $(BIN)/python -m pip freeze --exclude-editable | grep -v '^semlab=='; } > etc/constraints.txt.new
+	@mv etc/constraints.txt.new etc/constraints.txt
 
 lint: $(STAMP)
 	$(BIN)/ruff check semlab tests benchmarks
