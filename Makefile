@@ -74,9 +74,9 @@ strip: $(STAMP)
 	$(BIN)/nbstripout --keep-id notebooks/*.ipynb
 
 # The .venv's releases become the constraints make setup installs with (run after a green make test on
-# newer releases; the file's first three lines, its comment, are kept).
+# newer releases; the file's comment lines are kept).
 constraints: $(STAMP)
-	@{ head -3 etc/constraints.txt; $(BIN)/python -m pip freeze --exclude-editable | grep -v '^semlab=='; } > etc/constraints.txt.new
+	@{ grep '^#' etc/constraints.txt; $(BIN)/python -m pip freeze --exclude-editable | grep -v '^semlab=='; } > etc/constraints.txt.new
 	@mv etc/constraints.txt.new etc/constraints.txt
 
 lint: $(STAMP)

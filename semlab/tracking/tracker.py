@@ -342,10 +342,12 @@ class Tracker:
         # A match from the whole frame that is poorer than the track's typical one competes with the
         # re-acquisition in the window: a whole frame holds many such matches of texture that is not
         # the object (the real needle at contact, where its gray levels jump).
-        if not motion.lost and (not method.acceptable(found) or (widened and not method.good(found))):
-            verdict = method.reacquire(arr, window, predicted)
-            if verdict is not None and (not method.acceptable(found) or verdict.score > found.score):
-                return self._conclude(arr, verdict, predicted)
+        if not motion.lost:
+            acceptable = method.acceptable(found)
+            if not acceptable or (widened and not method.good(found)):
+                verdict = method.reacquire(arr, window, predicted)
+                if verdict is not None and (not acceptable or verdict.score > found.score):
+                    return self._conclude(arr, verdict, predicted)
         return self._conclude(arr, method.verdict(arr, found, predicted), predicted)
 
     def _conclude(self, arr, verdict: Verdict, predicted) -> TrackResult:
