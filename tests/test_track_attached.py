@@ -12,7 +12,7 @@ from test_track_uncertainty import CENTRE, ROI, wedge_frame
 
 from semlab.template import identify_contour_template
 from semlab.tracking import Tracker
-from semlab.tracking.attached import BAND_CLEARANCE_PX, attached_pieces, without_attached
+from semlab.tracking.attached import BAND_CLEARANCE_PX, _apex, apex_bumps, attached_pieces, without_attached
 
 #: The wedge's upper flank at x = 100 is at y = 95 (half-angle 14°, tip at x = 120): a disc of radius 5
 #: centred 5.5 px above it touches it.
@@ -155,3 +155,61 @@ def test_the_real_needle_s_corner_is_not_a_particle():
     cut.init(frames[0], roi)
     kept.init(frames[0], roi)
     assert np.array_equal(cut.contour.region, kept.contour.region)
+
+
+#: A particle beside the apex of the wedge (tip at (120, 100)), touching its upper flank: the openings
+#: shave it together with the tip, one piece at the apex, which they leave.
+AT_APEX = (117.0, 94.5)
+
+
+def test_a_particle_at_the_apex_is_cut_and_the_tip_stays():
+    patch = _roi(_with_particle(at=AT_APEX))
+    paper = identify_contour_template(patch)
+    region = paper.region
+    pieces = attached_pieces(region, patch)
+    ys, xs = np.nonzero(pieces)
+    assert xs.size and math.dist((xs.mean() + ROI[0], ys.mean() + ROI[1]), AT_APEX) < PARTICLE_RADIUS
+    assert np.array_equal(pieces, apex_bumps(region, _apex(region)))  # the openings alone leave it
+    contour, _ = without_attached(paper, patch)
+    assert _outside_the_wedge(region).sum() >= 10 and _outside_the_wedge(contour.region).sum() <= 2
+    # the tip stays: the cut region reaches as far as the clean wedge's
+    clean = identify_contour_template(_roi(wedge_frame(0.0, 0.0))).region
+    assert np.nonzero(contour.region)[1].max() >= np.nonzero(clean)[1].max() - 1
+
+
+def test_a_static_particle_at_the_apex_no_longer_holds_the_probe_back():
+    # As test_a_static_particle_no_longer_holds_the_probe_back, the particle beside the apex.
+    particle = {"at": AT_APEX}
+    cut, kept = _worst_error(particle), _worst_error(particle, cut_attached=False)
+    assert cut < 0.6 < kept
+
+
+def _bar(width, length=70, angle_deg=20.0, shape=(120, 120)):
+    """A bar of ``width`` px entering the ROI from its right border, its end ``length`` px inside."""
+    yy, xx = np.mgrid[:shape[0], :shape[1]].astype(np.float64)
+    a = math.radians(angle_deg)
+    u = (shape[1] - 1 - xx) * math.cos(a) + (yy - 60) * math.sin(a)
+    v = -(shape[1] - 1 - xx) * math.sin(a) + (yy - 60) * math.cos(a)
+    return (u >= -5) & (u <= length) & (np.abs(v) <= width / 2)
+
+
+def test_a_wide_end_face_keeps_its_bump():
+    # A bump at the corner of a 40-px-wide end: no thin tip, whose apex alone fixes the position along
+    # the shaft, so no cut (the wedge model's half-width guard: without it, the bump is cut).
+    yy, xx = np.mgrid[:120, :120]
+    region = _bar(40) | (np.hypot(xx - 52, yy - 40) <= 5)
+    assert not apex_bumps(region, _apex(region)).any()
+
+
+@pytest.mark.parametrize("family, seed", [("shapes", 102), ("shapes", 105), ("semi_real", 100), ("semi_real", 116)])
+def test_gripper_jaws_and_the_real_needle_lose_no_piece_at_the_apex(family, seed):
+    # Frame 0 of corpus scenes whose ends are no wedge: gripper jaws (their gap leaves the wedge between
+    # their outer flanks unfilled) and the semi-real needle's wide end. Without the guards, 25-66 px of
+    # each would be cut as particles.
+    from semlab.evaluation import make_family_sequence
+
+    seq = make_family_sequence(family, seed)
+    x, y, w, h = seq.roi
+    patch = np.asarray(seq.frames[0])[y:y + h, x:x + w]
+    region = identify_contour_template(patch, **Tracker().options.template.as_kwargs()).region
+    assert not apex_bumps(region, _apex(region)).any()

@@ -106,12 +106,14 @@ def test_a_template_part_that_does_not_move_with_the_probe_is_flagged():
     # Frame 0's contour takes the static blob for part of the wedge: as the wedge moves away from it,
     # the blob's quadrant pulls the answer back. Unflagged, several frames are more than 1 px off;
     # by default each of those says so (the flag changes no answer: the same track otherwise). The
-    # misfit tiles' trimming, which removes most of that pull (tests/test_track_trimming.py), is off, and
-    # the band kept at 3 px (the blob's soft flank reads as a blurred edge, which would widen it).
+    # misfit tiles' trimming, which removes most of that pull (tests/test_track_trimming.py), is off, so is
+    # the cut of particles attached at the apex, which removes the blob from the template
+    # (tests/test_track_attached.py), and the band kept at 3 px (the blob's soft flank reads as a blurred
+    # edge, which would widen it).
     frames = [_wedge_with_a_static_blob(0.6 * k, seed=k) for k in range(12)]
     runs = {}
     for reach in (None, MAX_INFLUENCE_PX):
-        t = Tracker(template_frames=1, max_influence=reach, misfit_p_value=None, band_px=3)
+        t = Tracker(template_frames=1, max_influence=reach, misfit_p_value=None, band_px=3, cut_attached=False)
         t.init(frames[0], ROI)
         runs[reach] = [t.update(f) for f in frames[1:]]
     off = np.array([abs(r.x - CENTRE[0] - 0.6 * (k + 1)) for k, r in enumerate(runs[None])])

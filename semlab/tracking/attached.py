@@ -20,6 +20,18 @@ also takes off, is the probe's own material). Such a piece is cut off the region
 (:func:`without_attached`) and the band keeps :data:`BAND_CLEARANCE_PX` away from it. Only where
 the outline is resolved above the noise (:data:`MAX_OUTLINE_NOISE` of the contrast): at low dose
 the noise itself makes bumps of the region's outline.
+
+A particle at the apex of a thin tip escapes the openings: the disc shaves the tip together with it,
+one piece that touches the apex, and the tip of a wedge is as bright as a particle (the rim). There
+the probe's own shape tells them apart (:func:`apex_bumps`): the flanks of a tip 14-44 px behind
+its apex (:data:`WEDGE_FIT_PX`) are extrapolated to the apex as a wedge (its axis and half-width,
+each linear in the distance from the apex), and what the region holds outside that wedge near the
+apex (:data:`BUMP_REACH_PX`), of a particle's size and round, is a particle. Only where the wedge
+describes the probe: the region fills the wedge between its flanks (:data:`MIN_WEDGE_FILL`; a
+gripper's gap does not) and the tip is thin (:data:`MAX_WEDGE_HALF_WIDTH_PX`; a wide end face fixes
+both axes by itself). Left in the template, such a particle holds the answer back along the shaft,
+where only the apex tells the position, by a pixel or more with a good score (the corpus's clutter
+family at low beam current: ``benchmarks/bench_corpus.py``).
 """
 
 from __future__ import annotations
@@ -32,7 +44,7 @@ import numpy as np
 
 from ..template import ContourTemplate, identify_contour_template
 
-__all__ = ["BAND_CLEARANCE_PX", "MAX_OUTLINE_NOISE", "attached_pieces", "clear_band", "without_attached"]
+__all__ = ["BAND_CLEARANCE_PX", "MAX_OUTLINE_NOISE", "apex_bumps", "attached_pieces", "clear_band", "without_attached"]
 
 
 class Opening(NamedTuple):
@@ -69,6 +81,29 @@ BAND_CLEARANCE_PX = 4
 #: The cut only where the smoothed noise is at most this fraction of the object's contrast (0.02-0.045
 #: on the development scenes at standard dose, 0.08-0.17 at low dose, where noise bumps the outline).
 MAX_OUTLINE_NOISE = 0.06
+#: The wedge of a tip is fitted to its body (the region opened by the first opening's disc) between
+#: these distances (px) from the apex: behind the particles at the apex, in front of the ROI's border.
+WEDGE_FIT_PX = (14.0, 44.0)
+#: Fewest body pixels, and distance bins (2 px each), the wedge is fitted to.
+MIN_WEDGE_PIXELS = 30
+MIN_WEDGE_BINS = 5
+WEDGE_BIN_PX = 2.0
+#: The wedge reaches this many px beyond its fitted flanks (the outline's roughness) and behind the apex.
+WEDGE_MARGIN_PX = 1.0
+WEDGE_BEHIND_APEX_PX = 2.0
+#: The region fills at least this fraction of the wedge's core (1 px inside its flanks) where it was
+#: fitted: a tapering tip 0.95-1 on the development scenes, gripper jaws with their gap 0.73-0.89.
+MIN_WEDGE_FILL = 0.94
+#: The wedge's half-width at :data:`BUMP_REACH_PX` from the apex is at most this (px): a thin tip
+#: (4-8 px on the development scenes' probes); the semi-real needle's end face is 10-11 px.
+MAX_WEDGE_HALF_WIDTH_PX = 10.0
+#: Bumps outside the wedge are looked for this near (px) the apex.
+BUMP_REACH_PX = 25.0
+#: A bump is a particle when it has at least this area (px², as the first opening's pieces) and fills
+#: at least this fraction of its enclosing circle: particles on the development scenes 0.4-0.94, a
+#: blunt end's corner outside a tapering fit 0.16, the outline's noise at low dose 0.09-0.14.
+MIN_BUMP_PX = 15
+MIN_BUMP_ROUNDNESS = 0.3
 #: The probe's and the background's levels: this far (px) inside the region, and outside it.
 LEVEL_MARGIN_PX = 3
 LEVEL_SMOOTHING_PX = 1.0
@@ -154,6 +189,76 @@ def attached_pieces(region, patch) -> np.ndarray:
                 if _is_particle(piece, int(stats[i, cv2.CC_STAT_AREA]), opening, to_apex, smoothed,
                                 (probe, background)):
                     cut |= piece
+    if apex is not None:
+        cut |= apex_bumps(region, apex)
+    return cut
+
+
+def _wedge(region: np.ndarray, apex: tuple[int, int]) -> np.ndarray | None:
+    """The wedge the tip's flanks draw to its ``apex`` (bool mask), or None where no thin, filled
+    wedge describes the region (see the module docstring)."""
+    ys, xs = np.nonzero(_body(region, OPENINGS[0].radius))
+    offsets = np.column_stack([xs - apex[0], ys - apex[1]]).astype(np.float64)
+    distance = np.hypot(offsets[:, 0], offsets[:, 1])
+    near, far = WEDGE_FIT_PX
+    fitted = (distance >= near) & (distance <= far)
+    if fitted.sum() < MIN_WEDGE_PIXELS:
+        return None
+    axis = offsets[fitted].mean(axis=0)
+    axis /= np.linalg.norm(axis)
+    normal = np.array([-axis[1], axis[0]])
+    along, across = offsets[fitted] @ axis, offsets[fitted] @ normal
+    bins = np.floor(along / WEDGE_BIN_PX).astype(np.int64)
+    rows = [(along[bins == b].mean(), 0.5 * (np.ptp(across[bins == b]) + 1.0), 0.5 * (across[bins == b].max()
+             + across[bins == b].min())) for b in np.unique(bins) if (bins == b).sum() >= 3]
+    if len(rows) < MIN_WEDGE_BINS:
+        return None
+    s, half, middle = np.array(rows).T
+    half_width, centre_line = np.polyfit(s, half, 1), np.polyfit(s, middle, 1)
+    if np.polyval(half_width, BUMP_REACH_PX) > MAX_WEDGE_HALF_WIDTH_PX:
+        return None
+    yy, xx = np.mgrid[:region.shape[0], :region.shape[1]]
+    s_all = (xx - apex[0]) * axis[0] + (yy - apex[1]) * axis[1]
+    off_axis = np.abs((xx - apex[0]) * normal[0] + (yy - apex[1]) * normal[1] - np.polyval(centre_line, s_all))
+    width = np.maximum(np.polyval(half_width, s_all), 0.0)
+    core = (s_all >= near) & (s_all <= far) & (off_axis <= width - WEDGE_MARGIN_PX)
+    if (region & core).sum() < MIN_WEDGE_FILL * core.sum():
+        return None
+    return (s_all >= -WEDGE_BEHIND_APEX_PX) & (off_axis <= width + WEDGE_MARGIN_PX)
+
+
+def apex_bumps(region, apex) -> np.ndarray:
+    """The particles at the apex of a thin tip: what ``region`` holds outside the wedge of the tip's
+    flanks near its ``apex`` (see the module docstring).
+
+    Parameters
+    ----------
+    region : (h, w) array_like of bool
+        The contour template's region.
+    apex : (x, y)
+        The region's apex (its pixel farthest from where it enters the ROI).
+
+    Returns
+    -------
+    (h, w) ndarray of bool
+        The bumps to cut (all False when the region is no thin wedge, or has none).
+    """
+    region = np.asarray(region, bool)
+    cut = np.zeros(region.shape, bool)
+    wedge = _wedge(region, apex)
+    if wedge is None:
+        return cut
+    yy, xx = np.mgrid[:region.shape[0], :region.shape[1]]
+    outside = region & ~wedge & (np.hypot(xx - apex[0], yy - apex[1]) <= BUMP_REACH_PX)
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(outside.astype(np.uint8), connectivity=4)
+    for i in range(1, n):
+        if not _particle_sized(stats[i], Opening(0, MIN_BUMP_PX, MIN_BUMP_ROUNDNESS, 0.0), region.shape):
+            continue
+        bump = labels == i
+        points = np.column_stack(np.nonzero(bump)[::-1]).astype(np.float32)
+        _, radius = cv2.minEnclosingCircle(points)
+        if stats[i, cv2.CC_STAT_AREA] >= MIN_BUMP_ROUNDNESS * np.pi * max(radius, 0.5) ** 2:
+            cut |= bump
     return cut
 
 
