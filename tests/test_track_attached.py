@@ -12,7 +12,12 @@ from test_track_uncertainty import CENTRE, ROI, wedge_frame
 
 from semlab.template import identify_contour_template
 from semlab.tracking import Tracker
-from semlab.tracking.attached import BAND_CLEARANCE_PX, _apex, apex_bumps, attached_pieces, without_attached
+from semlab.tracking.attached import (
+    BAND_CLEARANCE_PX,
+    apex_bumps,
+    attached_pieces,
+    without_attached,
+)
 
 #: The wedge's upper flank at x = 100 is at y = 95 (half-angle 14°, tip at x = 120): a disc of radius 5
 #: centred 5.5 px above it touches it.
@@ -169,7 +174,7 @@ def test_a_particle_at_the_apex_is_cut_and_the_tip_stays():
     pieces = attached_pieces(region, patch)
     ys, xs = np.nonzero(pieces)
     assert xs.size and math.dist((xs.mean() + ROI[0], ys.mean() + ROI[1]), AT_APEX) < PARTICLE_RADIUS
-    assert np.array_equal(pieces, apex_bumps(region, _apex(region)))  # the openings alone leave it
+    assert np.array_equal(pieces, apex_bumps(region))  # the openings alone leave it
     contour, _ = without_attached(paper, patch)
     assert _outside_the_wedge(region).sum() >= 10 and _outside_the_wedge(contour.region).sum() <= 2
     # the tip stays: the cut region reaches as far as the clean wedge's
@@ -198,7 +203,7 @@ def test_a_wide_end_face_keeps_its_bump():
     # the shaft, so no cut (the wedge model's half-width guard: without it, the bump is cut).
     yy, xx = np.mgrid[:120, :120]
     region = _bar(40) | (np.hypot(xx - 52, yy - 40) <= 5)
-    assert not apex_bumps(region, _apex(region)).any()
+    assert not apex_bumps(region).any()
 
 
 @pytest.mark.parametrize("family, seed", [("shapes", 102), ("shapes", 105), ("semi_real", 100), ("semi_real", 116)])
@@ -212,4 +217,4 @@ def test_gripper_jaws_and_the_real_needle_lose_no_piece_at_the_apex(family, seed
     x, y, w, h = seq.roi
     patch = np.asarray(seq.frames[0])[y:y + h, x:x + w]
     region = identify_contour_template(patch, **Tracker().options.template.as_kwargs()).region
-    assert not apex_bumps(region, _apex(region)).any()
+    assert not apex_bumps(region).any()

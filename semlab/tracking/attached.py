@@ -227,7 +227,7 @@ def _wedge(region: np.ndarray, apex: tuple[int, int]) -> np.ndarray | None:
     return (s_all >= -WEDGE_BEHIND_APEX_PX) & (off_axis <= width + WEDGE_MARGIN_PX)
 
 
-def apex_bumps(region, apex) -> np.ndarray:
+def apex_bumps(region, apex=None) -> np.ndarray:
     """The particles at the apex of a thin tip: what ``region`` holds outside the wedge of the tip's
     flanks near its ``apex`` (see the module docstring).
 
@@ -235,17 +235,18 @@ def apex_bumps(region, apex) -> np.ndarray:
     ----------
     region : (h, w) array_like of bool
         The contour template's region.
-    apex : (x, y)
-        The region's apex (its pixel farthest from where it enters the ROI).
+    apex : (x, y), optional
+        The region's apex, its pixel farthest from where it enters the ROI (found when not given).
 
     Returns
     -------
     (h, w) ndarray of bool
-        The bumps to cut (all False when the region is no thin wedge, or has none).
+        The bumps to cut (all False when the region is no thin wedge, has no apex or no bump).
     """
     region = np.asarray(region, bool)
     cut = np.zeros(region.shape, bool)
-    wedge = _wedge(region, apex)
+    apex = _apex(region) if apex is None else apex
+    wedge = None if apex is None else _wedge(region, apex)
     if wedge is None:
         return cut
     yy, xx = np.mgrid[:region.shape[0], :region.shape[1]]
