@@ -78,6 +78,10 @@ def test_the_tracker_cuts_it_and_keeps_the_band_clear():
     cut, kept = Tracker(), Tracker(cut_attached=False)
     cut.init(img, ROI)
     kept.init(img, ROI)
+    # what was cut, the tracker says (Tracker.attached: the pieces, as the TemplateExplorer shows them)
+    assert kept.attached is None and cut.attached.shape == (ROI[3], ROI[2])
+    ys, xs = np.nonzero(cut.attached)
+    assert math.dist((xs.mean() + ROI[0], ys.mean() + ROI[1]), PARTICLE_AT) < PARTICLE_RADIUS
     assert _outside_the_wedge(kept.contour.region).sum() >= 10 and _outside_the_wedge(cut.contour.region).sum() <= 2
     # the band keeps BAND_CLEARANCE_PX from what was cut (the piece and its 1-px neck)
     ys, xs = np.nonzero(kept.contour.region & ~cut.contour.region)

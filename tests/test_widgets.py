@@ -214,6 +214,32 @@ def test_explore_template_matches_the_explorer(explorer):
     assert direct["n_edges"] == explorer.result["n_edges"]
 
 
+def _wedge_with_a_particle_at_its_apex(particle: bool) -> np.ndarray:
+    """A bright wedge (tip at (120, 100), pointing +x, half-angle 14°) and, optionally, a dimmer particle of
+    radius 5 touching its upper flank beside the tip (tests/test_track_attached.py's AT_APEX)."""
+    yy, xx = np.mgrid[:200, :260].astype(float)
+    half = math.radians(14.0)
+    wedge = ((np.abs(yy - 100) * math.cos(half) + (xx - 120) * math.sin(half)) < 0).astype(float)
+    disc = (np.hypot(xx - 117.0, yy - 94.5) <= 5.0) * 0.6 if particle else 0.0
+    img = 50.0 + 130.0 * gaussian_filter(np.maximum(wedge, disc), 1.2)
+    return np.clip(img + np.random.default_rng(0).normal(0.0, 2.0, img.shape), 0, 255).astype(np.uint8)
+
+
+@pytest.mark.parametrize("particle", [True, False])
+def test_the_explorer_shows_the_particles_the_tracker_cuts(particle):
+    # The contour template (the paper's) takes in a particle touching the tip; the default tracker cuts it off
+    # (semlab.tracking.attached), and the explorer shows that cut (magenta) and says so in its readout.
+    ex = TemplateExplorer(_wedge_with_a_particle_at_its_apex(particle), (60, 40, 120, 120))
+    cut = ex.result["attached"]
+    assert cut.shape == (120, 120)
+    if particle:
+        ys, xs = np.nonzero(cut)
+        assert xs.size >= 15 and math.dist((xs.mean() + 60, ys.mean() + 40), (117.0, 94.5)) < 5.0
+        assert "attached particles" in ex.readout.value
+    else:
+        assert not cut.any() and "attached particles" not in ex.readout.value
+
+
 # --------------------------------------------------------------------------------------------
 # The ROI by a mouse click on the overview (paper: "the operator clicks the mouse near the probe tip, and a
 # 200x200 ROI is obtained automatically", Fig. 2b)

@@ -177,6 +177,9 @@ class Tracker:
         self.edge_sigma = 0.0
         self.roi = None
         self.algorithm: Method | None = None
+        #: The particles cut off frame 0's contour region (ROI-sized bool mask; None: none cut), set by init()
+        #: (:mod:`semlab.tracking.attached`).
+        self.attached = None
 
     # ------------------------------------------------------------------ set-up
     def init(self, frame, roi) -> TrackResult:
@@ -227,7 +230,7 @@ class Tracker:
             noise = NoiseModel()
         algorithm = METHOD_CLASSES[self.method](self.options)
         algorithm.start(Setup(image, roi, patch, contour, band, widths, noise, to_8bit))
-        self.algorithm, self.noise, self.roi = algorithm, noise, roi
+        self.algorithm, self.noise, self.roi, self.attached = algorithm, noise, roi, attached
         self.motion = Motion()
         self.centre0 = np.array(roi_centre(roi))
         # Frame 0 is the origin of every displacement: its position is the ROI's centre by definition.

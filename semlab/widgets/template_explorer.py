@@ -14,6 +14,7 @@ from ..edges import adaptive_canny_thresholds, canny_edges
 from ..plots import figure_png, show_edges, show_frame
 from ..roi import as_gray_float, check_roi, find_motion_roi, roi_centre, roi_from_click
 from ..template import identify_contour_template, to_uint8
+from ..tracking import Tracker
 from ..tracking.options import CANNY_SIGMA
 from ._common import (
     _SLIDER_STYLE,
@@ -55,7 +56,9 @@ def explore_template(frame, roi, *, sigma=2.0, threshold=None, morph_kernel=3, m
         ``roi``, ``patch`` (uint8 ROI), ``template`` (ContourTemplate or None), ``ok``, ``error``,
         ``threshold`` (the one used, gray levels), ``otsu`` (bool), ``area_px`` (px², NaN without a
         contour), ``length_px`` (contour pixels), ``edges`` (bool ROI edge map), ``canny`` (T_l, T_h),
-        ``adaptive`` (bool), ``n_edges`` (edge pixels).
+        ``adaptive`` (bool), ``n_edges`` (edge pixels), ``attached`` (bool ROI mask: the particles the
+        default tracker, ``semlab.Tracker`` with these parameters, cuts off the contour region and keeps
+        its band clear of, :mod:`semlab.tracking.attached`; all False without a contour or a cut).
     """
     image = as_gray_float(frame)
     x, y, w, h = check_roi(roi, image.shape)
@@ -72,6 +75,10 @@ def explore_template(frame, roi, *, sigma=2.0, threshold=None, morph_kernel=3, m
             out["threshold"] = float(threshold)
     else:
         out.update(template=t, ok=True, threshold=t.threshold, area_px=t.area, length_px=t.length)
+    out["attached"] = np.zeros(patch.shape, bool)
+    if out["ok"]:
+        out["attached"] = _attached_pieces(frame, (x, y, w, h), sigma=sigma, threshold=threshold,
+                                           morph_kernel=morph_kernel, morph_iterations=morph_iterations, choose=choose)
     adaptive = canny_low is None or canny_high is None
     thresholds = (adaptive_canny_thresholds(patch, sigma=canny_sigma) if adaptive
                   else (float(canny_low), float(canny_high)))
@@ -79,6 +86,17 @@ def explore_template(frame, roi, *, sigma=2.0, threshold=None, morph_kernel=3, m
     out.update(edges=edges, canny=tuple(float(v) for v in thresholds), adaptive=adaptive,
                n_edges=int(edges.sum()))
     return out
+
+
+def _attached_pieces(frame, roi, **template_params) -> np.ndarray:
+    """What the default tracker with these template parameters cuts off frame 0's contour region as
+    attached particles (ROI-sized bool mask; all False where it cuts none or cannot start)."""
+    tracker = Tracker(**template_params)
+    try:
+        tracker.init(frame, roi)
+    except ValueError:
+        return np.zeros((roi[3], roi[2]), bool)
+    return np.zeros((roi[3], roi[2]), bool) if tracker.attached is None else tracker.attached
 
 
 def _readout_html(r, pixel_size_nm, frame_label=None):
@@ -96,6 +114,9 @@ def _readout_html(r, pixel_size_nm, frame_label=None):
             area += f" ({r['area_px'] * s * s / 1e6:.3g} µm²)"
             length += f" ({r['length_px'] * s / 1e3:.3g} µm)"
         parts += [area, length]
+        cut = r.get("attached")
+        if cut is not None and cut.any():
+            parts.append(f"<b>attached particles</b> {int(cut.sum())} px² cut (magenta; the tracker's band keeps clear)")
     else:
         parts.append(f"<b>no contour</b>: {html.escape(r['error'])}")
     lo, hi = r["canny"]
@@ -112,6 +133,10 @@ def render_template_figure(frame, r, *, pixel_size_nm=None, size=(14, 3.9), fram
     show_frame(frame, axes[0], roi=r["roi"], contour=contour, contour_offset=(x, y),
                title=f"(a) {frame_label} and ROI")
     show_frame(r["patch"], axes[1], contour=contour, contour_offset=(x, y), origin=(x, y), title="(b) ROI, contour template")
+    cut = r.get("attached")
+    if cut is not None and cut.any():
+        h, w = cut.shape
+        axes[1].contour(np.arange(w) + x, np.arange(h) + y, cut.astype(float), levels=[0.5], colors="m", linewidths=1.0)
     binary = r["template"].morphed if r["ok"] else np.zeros_like(r["patch"])
     show_frame(binary, axes[2], contour=contour, contour_offset=(x, y), origin=(x, y), title="(d, e) threshold, morphology")
     show_edges(r["edges"], axes[3], origin=(x, y), title="adaptive Canny" if r["adaptive"] else "fixed Canny")
