@@ -184,7 +184,7 @@ def attached_pieces(region, patch) -> np.ndarray:
         shaved = (region & ~_body(region, opening.radius)).astype(np.uint8)
         n, labels, stats, _ = cv2.connectedComponentsWithStats(shaved, connectivity=4)
         for i in range(1, n):
-            if _particle_sized(stats[i], opening, region.shape):
+            if _particle_sized(stats[i], opening.min_area, region.shape):
                 piece = labels == i
                 if _is_particle(piece, int(stats[i, cv2.CC_STAT_AREA]), opening, to_apex, smoothed,
                                 (probe, background)):
@@ -253,22 +253,26 @@ def apex_bumps(region, apex=None) -> np.ndarray:
     outside = region & ~wedge & (np.hypot(xx - apex[0], yy - apex[1]) <= BUMP_REACH_PX)
     n, labels, stats, _ = cv2.connectedComponentsWithStats(outside.astype(np.uint8), connectivity=4)
     for i in range(1, n):
-        if not _particle_sized(stats[i], Opening(0, MIN_BUMP_PX, MIN_BUMP_ROUNDNESS, 0.0), region.shape):
-            continue
         bump = labels == i
-        points = np.column_stack(np.nonzero(bump)[::-1]).astype(np.float32)
-        _, radius = cv2.minEnclosingCircle(points)
-        if stats[i, cv2.CC_STAT_AREA] >= MIN_BUMP_ROUNDNESS * np.pi * max(radius, 0.5) ** 2:
+        if (_particle_sized(stats[i], MIN_BUMP_PX, region.shape)
+                and _round(bump, int(stats[i, cv2.CC_STAT_AREA]), MIN_BUMP_ROUNDNESS)):
             cut |= bump
     return cut
 
 
-def _particle_sized(stats, opening: Opening, shape) -> bool:
-    """Whether a shaved piece (its ``stats`` row of ``connectedComponentsWithStats``) has a particle's
-    area and stays off the ROI's border."""
+def _particle_sized(stats, min_area: int, shape) -> bool:
+    """Whether a piece (its ``stats`` row of ``connectedComponentsWithStats``) has a particle's area,
+    ``min_area`` to :data:`MAX_PIECE_PX`, and stays off the ROI's border."""
     x, y, bw, bh, area = (int(v) for v in stats)
     h, w = shape
-    return opening.min_area <= area <= MAX_PIECE_PX and x > 0 and y > 0 and x + bw < w and y + bh < h
+    return min_area <= area <= MAX_PIECE_PX and x > 0 and y > 0 and x + bw < w and y + bh < h
+
+
+def _round(piece, area: int, min_roundness: float) -> bool:
+    """Whether ``piece`` (``area`` px) fills at least ``min_roundness`` of its enclosing circle."""
+    points = np.column_stack(np.nonzero(piece)[::-1]).astype(np.float32)
+    _, radius = cv2.minEnclosingCircle(points)
+    return area >= min_roundness * np.pi * max(radius, 0.5) ** 2
 
 
 def _is_particle(piece, area: int, opening: Opening, to_apex, smoothed, levels) -> bool:
@@ -277,9 +281,7 @@ def _is_particle(piece, area: int, opening: Opening, to_apex, smoothed, levels) 
     apex), round enough, and dimmer than the probe (``levels``: the probe's and the background's)."""
     if to_apex is not None and float(to_apex[piece].min()) <= opening.apex_clearance:
         return False
-    points = np.column_stack(np.nonzero(piece)[::-1]).astype(np.float32)
-    _, radius = cv2.minEnclosingCircle(points)
-    if area < opening.min_roundness * np.pi * max(radius, 0.5) ** 2:
+    if not _round(piece, area, opening.min_roundness):
         return False
     probe, background = levels
     return (float(np.median(smoothed[piece])) - background) / (probe - background) < MAX_RELATIVE_LEVEL
