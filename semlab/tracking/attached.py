@@ -209,8 +209,12 @@ def _wedge(region: np.ndarray, apex: tuple[int, int]) -> np.ndarray | None:
     normal = np.array([-axis[1], axis[0]])
     along, across = offsets[fitted] @ axis, offsets[fitted] @ normal
     bins = np.floor(along / WEDGE_BIN_PX).astype(np.int64)
-    rows = [(along[bins == b].mean(), 0.5 * (np.ptp(across[bins == b]) + 1.0), 0.5 * (across[bins == b].max()
-             + across[bins == b].min())) for b in np.unique(bins) if (bins == b).sum() >= 3]
+    rows = []  # per bin: mean distance from the apex, half-width, centre across the axis
+    for b in np.unique(bins):
+        in_bin = bins == b
+        if in_bin.sum() >= 3:
+            lo, hi = across[in_bin].min(), across[in_bin].max()
+            rows.append((along[in_bin].mean(), 0.5 * (hi - lo + 1.0), 0.5 * (hi + lo)))
     if len(rows) < MIN_WEDGE_BINS:
         return None
     s, half, middle = np.array(rows).T

@@ -114,8 +114,8 @@ def _readout_html(r, pixel_size_nm, frame_label=None):
             area += f" ({r['area_px'] * s * s / 1e6:.3g} µm²)"
             length += f" ({r['length_px'] * s / 1e3:.3g} µm)"
         parts += [area, length]
-        cut = r.get("attached")
-        if cut is not None and cut.any():
+        if r["attached"].any():
+            cut = r["attached"]
             parts.append(f"<b>attached particles</b> {int(cut.sum())} px² cut (magenta; the tracker's band keeps clear)")
     else:
         parts.append(f"<b>no contour</b>: {html.escape(r['error'])}")
@@ -133,8 +133,8 @@ def render_template_figure(frame, r, *, pixel_size_nm=None, size=(14, 3.9), fram
     show_frame(frame, axes[0], roi=r["roi"], contour=contour, contour_offset=(x, y),
                title=f"(a) {frame_label} and ROI")
     show_frame(r["patch"], axes[1], contour=contour, contour_offset=(x, y), origin=(x, y), title="(b) ROI, contour template")
-    cut = r.get("attached")
-    if cut is not None and cut.any():
+    cut = r["attached"]
+    if cut.any():
         h, w = cut.shape
         axes[1].contour(np.arange(w) + x, np.arange(h) + y, cut.astype(float), levels=[0.5], colors="m", linewidths=1.0)
     binary = r["template"].morphed if r["ok"] else np.zeros_like(r["patch"])
