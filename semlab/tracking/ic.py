@@ -22,7 +22,14 @@ from .method import Method, Motion, Setup, Verdict
 from .registration import FitResult, Start, register
 from .search import coarse_mask, coarse_search, coarse_template, reacquire
 from .trimming import MIN_MISFIT_CONTRAST, trim_misfit_tiles
-from .uncertainty import Uncertainty, band_tiles, clustered_covariance, model_error, position_sigma
+from .uncertainty import (
+    RecentPrecision,
+    Uncertainty,
+    band_tiles,
+    clustered_covariance,
+    model_error,
+    position_sigma,
+)
 
 __all__ = ["ICMethod"]
 
@@ -67,6 +74,8 @@ class ICMethod(Method):
         self.consistency = None
         self.gain, self.offset = 1.0, 0.0
         self.scores: list[float] = []
+        #: The recent frames' precisions, by which each frame's is judged.
+        self.recent_precision = RecentPrecision()
         self._score_median = (0, float("nan"))
         self._coarse_mask = None
         #: The last accepted fit, when tiles were trimmed from it, and the band model it used.
@@ -203,7 +212,8 @@ class ICMethod(Method):
 
     def sigma(self, verdict: Verdict) -> Uncertainty | None:
         """The frame's fit (or the re-acquired match's) and the origin's, and the model error once
-        the object has moved (:mod:`semlab.tracking.uncertainty`)."""
+        the object has moved (:mod:`semlab.tracking.uncertainty`); the precision no better than
+        the recent frames' (:class:`~semlab.tracking.uncertainty.RecentPrecision`)."""
         found = verdict.found
         if found is None:
             return Uncertainty((np.inf, np.inf), (np.inf, np.inf))
@@ -212,7 +222,8 @@ class ICMethod(Method):
         cov = np.full((2, 2), np.inf) if cov is None else self._no_less_than_clustered(cov, parts)
         moved = float(np.hypot(*(np.asarray(verdict.shift, float) - self.origin)))
         return Uncertainty(position_sigma(cov, self.origin_cov, model_sd=model_error(moved, found.gain, found.score)),
-                           position_sigma(cov, self.origin_cov), self._influence(found, parts))
+                           self.recent_precision.judged(position_sigma(cov, self.origin_cov)),
+                           self._influence(found, parts))
 
     def _band_residuals(self, fit):
         """``(jacobian, residual, weights)`` of a registration at the band's pixels, or None (a

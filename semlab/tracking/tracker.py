@@ -137,7 +137,8 @@ class Tracker:
         right).
     max_sigma : float or None
         ``"ic"``: an answer whose frame allows no better than this many px (the fits' part of
-        ``sigma_x`` or ``sigma_y``, :mod:`semlab.tracking.uncertainty`) is reported ``ok=False``
+        ``sigma_x`` or ``sigma_y``, :mod:`semlab.tracking.uncertainty`; the median of the last
+        frames' where that is worse, :class:`~semlab.tracking.uncertainty.RecentPrecision`) is reported ``ok=False``
         ("too uncertain"; the tracker follows it all the same). The default,
         :data:`~semlab.tracking.uncertainty.SIGMA_LIMIT_PX`, keeps frames more than 1 px off below
         0.5 %; None never flags.
@@ -371,7 +372,8 @@ class Tracker:
             # a number that may be a pixel off.
             p = uncertainty.precision
             return TrackResult(float("nan"), float("nan"), result.score, False,
-                               f"too uncertain: the frame allows ({p[0]:.2f}, {p[1]:.2f}) px > max_sigma {limit:g} px")
+                               f"too uncertain: the frame and its recent ones allow ({p[0]:.2f}, {p[1]:.2f}) px "
+                               f"> max_sigma {limit:g} px")
         reach = self.options.loss.max_influence
         if (uncertainty is not None and reach is not None and self.algorithm.flags_uncertain
                 and inconsistent(uncertainty.influence, reach)):
