@@ -189,11 +189,11 @@ def _claims_02(r):
     # "semlab's default now reports no frame more than 1 px off as ok at any dose"
     assert r["ic_silent_1px_max"] == 0
     # "at 6.25 pA and at 12.5 pA every frame (39 of 39 each) is flagged 'too uncertain', its sigma_x (median 0.66
-    # and 0.45 px) being above max_sigma = 0.35 px ... (a cross on the bottom edge, as for the SSD baseline, which
+    # and 0.47 px) being above max_sigma = 0.35 px ... (a cross on the bottom edge, as for the SSD baseline, which
     # loses every frame at 6.25 pA)"
     flags = r["ic_flagged_too_uncertain"]
     assert flags["6.25"] == 39 == flags["12.5"] and r["ic_all_flagged_doses"] == [6.25, 12.5]
-    assert round(r["ic_sigma_x_median_lowest_dose_unflagged"], 2) == 0.66 and round(r["ic_sigma_x_median_12_5"], 2) == 0.45
+    assert round(r["ic_sigma_x_median_lowest_dose_unflagged"], 2) == 0.66 and round(r["ic_sigma_x_median_12_5"], 2) == 0.47
     assert r["ssd_all_lost_lowest_dose"] and r["missing_points"] >= 3   # semlab at two doses, SSD at one
     assert r["missing_points_marked"] >= r["missing_points"]
     # "At 6.25 pA, yes: they spread 0.69 px, with 4 frames more than 1 px off (the worst 3.2 px). At 12.5 pA, no: they
@@ -205,12 +205,12 @@ def _claims_02(r):
     # "Where the unflagged fits are right, the sigma_x semlab reports is 1.5-2.1 times their measured x spread"
     assert 1.45 <= r["sigma_over_std_x_min"] and r["sigma_over_std_x_max"] <= 2.15
     # "Where the default flags nothing (100 pA, and 50 pA in a full run) it spreads 0.11-0.13 px, 1.2-1.6 times the
-    # bound; at 25 pA (full run) it flags 5 frames of 39, none of them more than 0.7 px off without the flag"
+    # bound; at 25 pA (full run) it flags 6 frames of 39, none of them more than 0.7 px off without the flag"
     assert r["ic_trusted_doses"] == ([50.0, 100.0] if full else [100.0])
     assert 0.105 <= r["ic_std_highest_dose"] <= 0.13
     assert 1.2 <= r["ic_std_over_crb_trusted_min"] and r["ic_std_over_crb_trusted_max"] <= 1.6
     if full:
-        assert flags["25.0"] == 5 and r["free_max_error_px"]["25.0"] < 0.7
+        assert flags["25.0"] == 6 and r["free_max_error_px"]["25.0"] < 0.7
 
 
 def _claims_03(r):
@@ -322,16 +322,16 @@ def _claims_06(r):
     assert r["low_dose_best_peer"] == "opencv TM_SQDIFF" and round(r["low_dose_best_peer_rmse_px"], 1) == 1.9
     assert 0.2 <= r["low_dose_best_peer_loss"] <= 0.3
     # "the same fits without them are 0.33 px RMSE (0.37 in fast mode) and none is more than 1 px off, but the
-    # sigma_x semlab reports for them, about 0.6 px, is about three times the bound of 0.21 px and above max_sigma"
+    # sigma_x semlab reports for them, about 0.6-0.7 px, is about three times the bound of 0.21 px and above max_sigma"
     assert round(r["low_dose_free_rmse_px"], 2) == (0.33 if full else 0.37) and r["low_dose_free_silent_1px"] == 0
     assert r["low_dose_free_max_error_px"] < 1.0 and round(r["low_dose_crb_x"], 2) == 0.21
-    assert 0.55 <= r["low_dose_free_sigma_x"] <= 0.65 and 2.7 <= r["low_dose_free_sigma_x"] / r["low_dose_crb_x"] < 3.3
+    assert 0.55 <= r["low_dose_free_sigma_x"] <= 0.72 and 2.7 <= r["low_dose_free_sigma_x"] / r["low_dose_crb_x"] < 3.5
     # "at 3 pA semlab no longer refuses to start ...; it flags every frame, 58 of 59 as too uncertain (9 of 9 in
-    # fast mode) with sigma_x of 1.5 px (1.4 in fast mode) against a bound of 0.39 px, and rightly: without the flag its
+    # fast mode) with sigma_x of 1.5 px (1.7 in fast mode) against a bound of 0.39 px, and rightly: without the flag its
     # fits are 4.1 px RMSE (9.5 in fast mode) with 31 of 59 frames (9 of 9) more than 1 px off"
     assert r["semlab_all_flagged_worst_noise"] and r["trackers_refused_worst_noise"] == 0
     assert (r["semlab_too_uncertain_worst_noise"], r["semlab_frames_worst_noise"]) == ((58, 59) if full else (9, 9))
-    assert round(r["free_sigma_x_worst_noise"], 1) == (1.5 if full else 1.4) and round(r["crb_x_worst_noise"], 2) == 0.39
+    assert round(r["free_sigma_x_worst_noise"], 1) == (1.5 if full else 1.7) and round(r["crb_x_worst_noise"], 2) == 0.39
     # (full run: 4.1 px and 31 frames on one machine, 4.2 and 38 on an AVX-512 one: unconstrained fits at 3 pA)
     assert r["free_rmse_worst_noise"] in ((4.1, 4.2) if full else (9.5,))
     assert (31 <= r["free_silent_1px_worst_noise"] <= 38) if full else r["free_silent_1px_worst_noise"] == 9
@@ -346,14 +346,14 @@ def _claims_06(r):
     # RMSE (0.16-0.19 px)"
     assert r["gray25_too_uncertain"] == 0 and 0.185 <= r["gray25_sigma_x"] <= 0.235
     assert 0.155 <= r["gray25_rmse_px"] <= 0.195
-    # "With the occluder passing it flags 11 of 59 frames in a full run (none in fast mode), where its unflagged fits
+    # "With the occluder passing it flags 13 of 59 frames in a full run (none in fast mode), where its unflagged fits
     # are at most 0.86 px off. In none of these rows does semlab report a frame more than 1 px off as ok."
-    assert r["occluder_too_uncertain"] == (11 if full else 0) and r["occluder_free_max_error_px"] <= 0.865
+    assert r["occluder_too_uncertain"] == (13 if full else 0) and r["occluder_free_max_error_px"] <= 0.865
     assert r["semlab_silent_1px_hardest_max"] == 0
     # "the paper's contour tracker loses the probe in about a third of the frames (0.37; 0.33 in fast mode) and
-    # semlab's default in 20 % (the frames it flags; none in fast mode)"
+    # semlab's default in 22 % (the frames it flags; none in fast mode)"
     assert r["contour_loss_occluder"] == (0.37 if full else 0.33)
-    assert r["semlab_loss_occluder"] == (0.2 if full else 0.0)
+    assert r["semlab_loss_occluder"] == (0.22 if full else 0.0)
 
 
 def _claims_07(r):

@@ -29,6 +29,7 @@ from .uncertainty import (
     clustered_covariance,
     model_error,
     position_sigma,
+    young_template_inflation,
 )
 
 __all__ = ["ICMethod"]
@@ -212,8 +213,9 @@ class ICMethod(Method):
 
     def sigma(self, verdict: Verdict) -> Uncertainty | None:
         """The frame's fit (or the re-acquired match's) and the origin's, and the model error once
-        the object has moved (:mod:`semlab.tracking.uncertainty`); the precision no better than
-        the recent frames' (:class:`~semlab.tracking.uncertainty.RecentPrecision`)."""
+        the object has moved (:mod:`semlab.tracking.uncertainty`), the fit's part larger against a
+        young template (:func:`~semlab.tracking.uncertainty.young_template_inflation`); the
+        precision no better than the recent frames' (:class:`~semlab.tracking.uncertainty.RecentPrecision`)."""
         found = verdict.found
         if found is None:
             return Uncertainty((np.inf, np.inf), (np.inf, np.inf))
@@ -221,7 +223,9 @@ class ICMethod(Method):
         parts = self._band_residuals(found)
         cov = np.full((2, 2), np.inf) if cov is None else self._no_less_than_clustered(cov, parts)
         moved = float(np.hypot(*(np.asarray(verdict.shift, float) - self.origin)))
-        return Uncertainty(position_sigma(cov, self.origin_cov, model_sd=model_error(moved, found.gain, found.score)),
+        reported = cov * young_template_inflation(self.n_averaged) ** 2
+        return Uncertainty(position_sigma(reported, self.origin_cov,
+                                          model_sd=model_error(moved, found.gain, found.score)),
                            self.recent_precision.judged(position_sigma(cov, self.origin_cov)),
                            self._influence(found, parts))
 
