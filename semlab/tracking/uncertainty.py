@@ -23,6 +23,7 @@ band that disagrees with the rest — is judged by :mod:`semlab.tracking.consist
 from __future__ import annotations
 
 import math
+from collections import deque
 from typing import NamedTuple
 
 import numpy as np
@@ -203,14 +204,14 @@ class RecentPrecision:
     Where a track's frames allow about :data:`SIGMA_LIMIT_PX` (a thin needle at low dose), the frame
     whose own precision dips under the limit has more often registered onto something sharper than
     the probe — noise blobs frame 0's contour took in — than seen the probe better: on the
-    corpus's thin low-dose needle (development seed 114) five of six such frames were 7-25 px off.
+    corpus's thin low-dose needle (development seed 114) all five frames reported ok were 7-25 px off.
     So a frame is credited with ``max(own, median of the last RECENT_FRAMES, its own included)``
     per axis once :data:`MIN_RECENT_FRAMES` are known; a sharp track (every frame well under the
     limit) is unaffected.
     """
 
     def __init__(self) -> None:
-        self.recent: list[tuple[float, float]] = []
+        self.recent: deque[tuple[float, float]] = deque(maxlen=RECENT_FRAMES)
 
     def judged(self, precision: tuple[float, float]) -> tuple[float, float]:
         """``precision`` (px, x and y), no better than the recent frames' median; records it when
@@ -218,7 +219,7 @@ class RecentPrecision:
         own = (float(precision[0]), float(precision[1]))
         if not all(math.isfinite(p) for p in own):
             return own
-        self.recent = (self.recent + [own])[-RECENT_FRAMES:]
+        self.recent.append(own)
         if len(self.recent) < MIN_RECENT_FRAMES:
             return own
         typical = np.median(np.asarray(self.recent), axis=0)
