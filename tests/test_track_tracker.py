@@ -18,6 +18,9 @@ from semlab.tracking import (
     TrackResult,
     track,
 )
+from semlab.evaluation import make_family_sequence
+from semlab.evaluation.scoring import frame_errors
+from semlab.tracking.ic import ICMethod
 from semlab.tracking.search import search_window
 
 SHAPE = (200, 260)
@@ -291,6 +294,27 @@ def test_a_jump_along_the_shaft_is_not_mistaken_for_the_shaft(jump, gain, offset
     assert found is not None and found.ok
     dx, dy = found.shift - t.algorithm.origin  # the displacement from frame 0
     assert dx == pytest.approx(jump, abs=1.0) and dy == pytest.approx(0.0, abs=1.0)
+
+
+def test_a_jump_out_of_the_window_is_not_taken_for_a_poorer_match_inside_it(monkeypatch):
+    # Spare seed 236 of the corpus's jumps family (neither a development nor a test seed): the probe
+    # jumps 88 px between frames 2 and 3, out of the search window. In the window a piece of the scene
+    # matches the template at 0.76 where the track's typical score is 0.93: above the loss
+    # threshold, and 50 px off. The whole frame holds the probe itself at the typical score.
+    seq = make_family_sequence("jumps", 236)
+    frames, roi = seq.frames[:6], seq.roi
+
+    def worst_ok_error():
+        df = track(frames, roi)
+        err = frame_errors(df, seq.truth, roi)
+        return df["ok"].to_numpy(), np.hypot(err["ex"], err["ey"]).to_numpy()
+
+    ok, err = worst_ok_error()
+    assert ok.all() and err.max() < 1.0
+    # The trap is real: without the whole frame's clearly better match, frame 3 is far off and ok.
+    monkeypatch.setattr(ICMethod, "clearly_better", lambda self, other, fit: False)
+    ok, err = worst_ok_error()
+    assert ok[3] and err[3] > 10.0
 
 
 def test_static_background_next_to_the_probe_does_not_pull_it_back():

@@ -179,6 +179,9 @@ class ICMethod(Method):
     def acceptable(self, fit) -> bool:
         return fit.converged and fit.score >= self.threshold()
 
+    def clearly_better(self, other, fit) -> bool:
+        return other.converged and other.score > fit.score + SCORE_TIE
+
     def reacquire(self, arr, window, predicted) -> Verdict | None:
         """The appearance changed: the contrast-invariant correlation of the object over the whole
         window, refined by Gauss–Newton when that converges nearby."""

@@ -159,6 +159,10 @@ class Method:
         """Whether ``found`` may stand without a re-acquisition (asked unless lost)."""
         return True
 
+    def clearly_better(self, other, found) -> bool:
+        """Whether ``other`` (from a wider search) beats an acceptable ``found`` by more than a tie."""
+        return False
+
     def reacquire(self, arr, window, predicted) -> Verdict | None:
         """The fallback when ``found`` is not acceptable: an accepted verdict, or None."""
         return None

@@ -337,12 +337,8 @@ class Tracker:
         widened = False
         if not method.good(found):
             found = method.search(arr, window, predicted, found)
-            if method.widens_search and not motion.lost and not method.acceptable(found):
-                # Farther than the window reaches (a feed-forward step, the paper's 200-px moves in
-                # two frames): the whole frame before giving up, rather than a lost frame.
-                whole = search_window(self.roi, self.options.search.search_size, predicted, arr.shape, whole=True)
-                if whole != window:
-                    found, widened = method.search(arr, whole, predicted, found), True
+            if method.widens_search and not motion.lost and not method.good(found):
+                found, widened = self._search_whole_frame(arr, window, predicted, found)
         # A match from the whole frame that is poorer than the track's typical one competes with the
         # re-acquisition in the window: a whole frame holds many such matches of texture that is not
         # the object (the real needle at contact, where its gray levels jump).
@@ -353,6 +349,24 @@ class Tracker:
                 if verdict is not None and (not acceptable or verdict.score > found.score):
                     return self._conclude(arr, verdict, predicted)
         return self._conclude(arr, method.verdict(arr, found, predicted), predicted)
+
+    def _search_whole_frame(self, arr, window, predicted, found):
+        """``(found, widened)`` after a search of the whole frame, for a window that gave no good match.
+
+        The object may be farther than the window reaches (a feed-forward step, the paper's 200-px
+        moves in two frames). When the window's match is not acceptable, the whole frame's stands in
+        for it, rather than a lost frame. When it is acceptable but poor, it may be something else
+        that looks partly like the object (after a jump out of the window), and the whole frame's
+        match replaces it only when clearly better.
+        """
+        method = self.algorithm
+        whole = search_window(self.roi, self.options.search.search_size, predicted, arr.shape, whole=True)
+        if whole == window:
+            return found, False
+        if not method.acceptable(found):
+            return method.search(arr, whole, predicted, found), True
+        other = method.search(arr, whole, predicted, None)
+        return (other, True) if method.clearly_better(other, found) else (found, False)
 
     def _conclude(self, arr, verdict: Verdict, predicted) -> TrackResult:
         if not verdict.ok:
