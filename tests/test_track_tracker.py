@@ -10,6 +10,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy.special import ndtr
 
+from semlab.evaluation import make_family_sequence
+from semlab.evaluation.scoring import frame_errors
 from semlab.tracking import (
     DEFAULT_METHOD,
     DENOISE_FROM_FRAMES,
@@ -18,8 +20,6 @@ from semlab.tracking import (
     TrackResult,
     track,
 )
-from semlab.evaluation import make_family_sequence
-from semlab.evaluation.scoring import frame_errors
 from semlab.tracking.ic import ICMethod
 from semlab.tracking.search import search_window
 
@@ -304,16 +304,16 @@ def test_a_jump_out_of_the_window_is_not_taken_for_a_poorer_match_inside_it(monk
     seq = make_family_sequence("jumps", 236)
     frames, roi = seq.frames[:6], seq.roi
 
-    def worst_ok_error():
+    def ok_and_errors():
         df = track(frames, roi)
         err = frame_errors(df, seq.truth, roi)
         return df["ok"].to_numpy(), np.hypot(err["ex"], err["ey"]).to_numpy()
 
-    ok, err = worst_ok_error()
+    ok, err = ok_and_errors()
     assert ok.all() and err.max() < 1.0
     # The trap is real: without the whole frame's clearly better match, frame 3 is far off and ok.
     monkeypatch.setattr(ICMethod, "clearly_better", lambda self, other, fit: False)
-    ok, err = worst_ok_error()
+    ok, err = ok_and_errors()
     assert ok[3] and err[3] > 10.0
 
 

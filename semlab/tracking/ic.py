@@ -170,7 +170,7 @@ class ICMethod(Method):
         match of the two, the one nearer the prediction when about as good."""
         found = self._register(arr, Start(coarse_search(arr, window, self.coarse, self.options.search.coarse_factor,
                                                         self.roi), self.gain, self.offset))
-        if fit is None or (found.converged and (not fit.converged or found.score > fit.score + SCORE_TIE or (
+        if fit is None or self.clearly_better(found, fit) or (found.converged and (not fit.converged or (
                 found.score >= fit.score - SCORE_TIE
                 and np.hypot(*(found.shift - predicted)) < np.hypot(*(fit.shift - predicted))))):
             return found
