@@ -95,6 +95,8 @@ CONTRACT = {
     # issue 14: answers too uncertain to trust are flagged (semlab.tracking.uncertainty.SIGMA_LIMIT_PX)
     "max_sigma": 0.35,
     "max_influence": 0.5,
+    # issue 14: every answer is flagged when frame 0's object is not resolved above the noise
+    "min_resolved_contrast": 6.0,
     # issue 14: the band's tiles the template does not explain are dropped (semlab.tracking.trimming)
     "misfit_p_value": 1e-4,
     # issue 14: which contour is the object; None: "central" for "ic", the paper's "largest" for the others

@@ -21,7 +21,7 @@ from .options import DEFAULT_METHOD, KEYWORD_GROUP, TrackerOptions
 from .paper import ContourMethod, HBMethod, SSDMethod
 from .result import TrackResult
 from .search import search_window
-from .uncertainty import too_uncertain
+from .uncertainty import too_uncertain, unresolved
 
 __all__ = ["METHOD_CLASSES", "Tracker"]
 
@@ -148,6 +148,13 @@ class Tracker:
         ("inconsistent": a part of the template does not move with the object, or clutter covers
         it; :mod:`semlab.tracking.consistency`); the tracker follows it all the same. None never
         flags.
+    min_resolved_contrast : float or None
+        ``"ic"``: every answer is reported ``ok=False`` ("unresolved"; the tracker follows it all the
+        same) when frame 0's object stands less than this many standard deviations of the smoothed
+        noise above its background (:attr:`contrast_noise`;
+        :data:`~semlab.tracking.uncertainty.MIN_RESOLVED_CONTRAST`): there the noise shapes the outline
+        as much as the object, and a thin shaft's registration slides along it unseen by its
+        precision. None never flags.
 
     An unknown keyword raises TypeError with the list of the allowed ones; the options, checked
     and grouped by concern, are :attr:`options` (:class:`~semlab.tracking.options.TrackerOptions`).
@@ -174,6 +181,9 @@ class Tracker:
         self.method = method
         #: The background's texture over the noise (standard deviations), measured by init().
         self.texture = None
+        #: Frame 0's object/background contrast over the noise of the smoothed ROI it was found in (standard
+        #: deviations), measured by init(); below ``min_resolved_contrast`` every answer is flagged.
+        self.contrast_noise = None
         #: The edge's blur (px) along frame 0's contour, measured by init() (:func:`~semlab.tracking.band.edge_blur`).
         self.edge_sigma = 0.0
         self.roi = None
@@ -215,6 +225,7 @@ class Tracker:
             float(patch.min()), 255.0 / max(float(patch.max() - patch.min()), 1e-12))
         noise = estimate_noise(patch)
         contrast, smoothed_sd = _check_contrast(patch, contour, noise, roi, self.options.template.sigma)
+        self.contrast_noise = contrast / smoothed_sd if smoothed_sd > 0 else float("inf")
         self.texture = background_texture(patch, contour.region, noise)
         self.edge_sigma = edge_blur(patch, contour, contrast)
         widths = self.band_widths()
@@ -378,27 +389,36 @@ class Tracker:
         moved = self.algorithm.after_accept(arr, verdict)
         if moved is not None:  # the template's origin moved: the state follows (the position stays)
             motion.shift = motion.shift + moved
-        limit = self.options.loss.max_sigma
-        if (uncertainty is not None and limit is not None and self.algorithm.flags_uncertain
-                and too_uncertain(uncertainty.precision, limit)):
+        reason = self._distrust(uncertainty)
+        if reason is not None:
             # Followed (the motion moves on, the next frame starts from here; a frame that
             # registered well still improves the template) but not trusted: a flag is better than
             # a number that may be a pixel off.
-            p = uncertainty.precision
-            return TrackResult(float("nan"), float("nan"), result.score, False,
-                               f"too uncertain: the frame and its recent ones allow ({p[0]:.2f}, {p[1]:.2f}) px "
-                               f"> max_sigma {limit:g} px")
-        reach = self.options.loss.max_influence
-        if (uncertainty is not None and reach is not None and self.algorithm.flags_uncertain
-                and inconsistent(uncertainty.influence, reach)):
-            pull = uncertainty.influence
-            return TrackResult(float("nan"), float("nan"), result.score, False,
-                               f"inconsistent: one quadrant of the band moves the answer {pull.shift_px:.2f} px "
-                               f"> max_influence {reach:g} px (chi2 {pull.chi2:.0f})")
+            return TrackResult(float("nan"), float("nan"), result.score, False, reason)
         if uncertainty is None:
             return result
         sx, sy = uncertainty.sigma
         return dataclasses.replace(result, sigma_x=float(sx), sigma_y=float(sy))
+
+    def _distrust(self, uncertainty) -> str | None:
+        """Why a followed answer is not to be trusted, or None: the frame's precision too poor, one part
+        of its band moving it alone, or frame 0's object not resolved above the noise (:attr:`options`'
+        ``loss``; methods that judge their answers only)."""
+        if uncertainty is None or not self.algorithm.flags_uncertain:
+            return None
+        loss = self.options.loss
+        if loss.max_sigma is not None and too_uncertain(uncertainty.precision, loss.max_sigma):
+            p = uncertainty.precision
+            return (f"too uncertain: the frame and its recent ones allow ({p[0]:.2f}, {p[1]:.2f}) px "
+                    f"> max_sigma {loss.max_sigma:g} px")
+        if loss.max_influence is not None and inconsistent(uncertainty.influence, loss.max_influence):
+            pull = uncertainty.influence
+            return (f"inconsistent: one quadrant of the band moves the answer {pull.shift_px:.2f} px "
+                    f"> max_influence {loss.max_influence:g} px (chi2 {pull.chi2:.0f})")
+        if loss.min_resolved_contrast is not None and unresolved(self.contrast_noise, loss.min_resolved_contrast):
+            return (f"unresolved: frame 0's object stands {self.contrast_noise:.1f} noise standard deviations above "
+                    f"its background < min_resolved_contrast {loss.min_resolved_contrast:g}")
+        return None
 
     def _lose(self, reason: str) -> TrackResult:
         motion = self.motion
