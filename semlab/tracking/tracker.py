@@ -232,7 +232,7 @@ class Tracker:
         attached = None
         # The cut only where the region's bumps are the scene's, not the noise's.
         if (METHOD_CLASSES[self.method].cuts_attached and self.options.band.cut_attached
-                and smoothed_sd <= MAX_OUTLINE_NOISE * contrast):
+                and self.contrast_noise * MAX_OUTLINE_NOISE >= 1.0):
             contour, attached = without_attached(contour, raw, choose=self.options.template.choose)
         band = clear_band(registration_band(contour, widths), attached)
         if band.sum() < MIN_BAND_PIXELS:
