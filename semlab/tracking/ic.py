@@ -161,9 +161,13 @@ class ICMethod(Method):
             fit = self._register(arr, start, give_up=True)
         return fit
 
+    def typical_score(self) -> float | None:
+        """A fraction of the first frames' median score (None before frame 1 is registered)."""
+        return TYPICAL_SCORE_FRACTION * self._median_score() if self.scores else None
+
     def good(self, fit) -> bool:
-        typical = TYPICAL_SCORE_FRACTION * self._median_score() if self.scores else 1.0
-        return fit is not None and fit.converged and fit.score >= max(self.threshold(), typical)
+        typical = self.typical_score()
+        return fit is not None and fit.converged and fit.score >= max(self.threshold(), 1.0 if typical is None else typical)
 
     def search(self, arr, window, predicted, fit) -> FitResult:
         """A jump, a poor match or a lost target: the coarse search over the window, and the better

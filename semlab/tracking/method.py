@@ -151,6 +151,10 @@ class Method:
         """Whether what :meth:`follow` found makes a search unnecessary."""
         return False
 
+    def typical_score(self) -> float | None:
+        """The score a match of the object reaches on this track, or None when the method keeps none."""
+        return None
+
     def search(self, arr, window, predicted, found):
         """Search ``window`` (the whole image after a loss); returns what is found (or ``found``)."""
         raise NotImplementedError

@@ -21,7 +21,7 @@ from .options import DEFAULT_METHOD, KEYWORD_GROUP, TrackerOptions
 from .paper import ContourMethod, HBMethod, SSDMethod
 from .result import TrackResult
 from .search import search_window
-from .uncertainty import too_uncertain, unresolved
+from .uncertainty import ambiguous_jump, too_uncertain, unresolved
 
 __all__ = ["METHOD_CLASSES", "Tracker"]
 
@@ -383,13 +383,18 @@ class Tracker:
         if not verdict.ok:
             return self._lose(verdict.reason)
         motion = self.motion
-        motion.prediction_error = np.inf if verdict.reacquired else float(np.hypot(*(verdict.shift - predicted)))
+        missed = float(np.hypot(*(verdict.shift - predicted)))
+        motion.prediction_error = np.inf if verdict.reacquired else missed
+        # Off the track: as far from where it was last as from where it was heading (a frame after a
+        # jump is predicted as far again), and farther than the move it was expected to make.
+        jump = min(missed, float(np.hypot(*(verdict.shift - motion.shift))))
+        expected = float(np.hypot(*(predicted - motion.shift)))
         result = self._accept(verdict.shift, verdict.score)
         uncertainty = self.algorithm.sigma(verdict)
         moved = self.algorithm.after_accept(arr, verdict)
         if moved is not None:  # the template's origin moved: the state follows (the position stays)
             motion.shift = motion.shift + moved
-        reason = self._distrust(uncertainty)
+        reason = self._distrust(uncertainty) or self._doubt_jump(jump, expected, verdict.score)
         if reason is not None:
             # Followed (the motion moves on, the next frame starts from here; a frame that
             # registered well still improves the template) but not trusted: a flag is better than
@@ -419,6 +424,19 @@ class Tracker:
             return (f"unresolved: frame 0's object stands {self.contrast_noise:.1f} noise standard deviations above "
                     f"its background < min_resolved_contrast {loss.min_resolved_contrast:g}")
         return None
+
+    def _doubt_jump(self, jump: float, expected: float, score: float) -> str | None:
+        """Why an answer ``jump`` px from the prediction and the last position, at a match of ``score``, is
+        ambiguous, or None: farther than :attr:`options`' ``max_poor_jump`` and than the ``expected`` move
+        (px; an object may stop, or double its speed, in a frame), at a match under the track's typical
+        one (:func:`~semlab.tracking.uncertainty.ambiguous_jump`; methods that judge their answers only)."""
+        if self.options.loss.max_poor_jump is None or not self.algorithm.flags_uncertain:
+            return None
+        limit, typical = max(self.options.loss.max_poor_jump, expected), self.algorithm.typical_score()
+        if not ambiguous_jump(jump, score, typical, limit):
+            return None
+        return (f"ambiguous: {jump:.1f} px off the track > {limit:.1f} px (max_poor_jump or the expected move), "
+                f"at a match scoring {score:.2f} < the track's typical {typical:.2f}")
 
     def _lose(self, reason: str) -> TrackResult:
         motion = self.motion

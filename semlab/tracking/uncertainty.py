@@ -17,7 +17,10 @@ A frame whose own data allow no better than :data:`SIGMA_LIMIT_PX` is not truste
 follows it (its motion state moves on) but reports ``ok=False``, so that nothing downstream (the
 servo) acts on a number that may be a pixel off; nor is a frame that claims much better than the
 frames before it (:class:`RecentPrecision`). What a frame's precision cannot see — a part of the
-band that disagrees with the rest — is judged by :mod:`semlab.tracking.consistency`.
+band that disagrees with the rest — is judged by :mod:`semlab.tracking.consistency`. Nor is an
+answer that jumped away from the prediction to a match poorer than the track's typical one
+(:func:`ambiguous_jump`): another minimum of the cost, which may be the object or something that looks
+partly like it.
 """
 
 from __future__ import annotations
@@ -31,6 +34,7 @@ import numpy as np
 from .consistency import Influence
 
 __all__ = [
+    "AMBIGUOUS_JUMP_PX",
     "CALIBRATION",
     "CLUSTER_TILE_PX",
     "INTEGER_VARIANCE_PX2",
@@ -46,6 +50,7 @@ __all__ = [
     "YOUNG_TEMPLATE_INFLATION",
     "RecentPrecision",
     "Uncertainty",
+    "ambiguous_jump",
     "band_tiles",
     "clustered_covariance",
     "least_squares_covariance",
@@ -108,6 +113,16 @@ MIN_RECENT_FRAMES = 3
 #: evaluation corpus's development seeds no ok frame within 1 px comes from such a scene; on its spare
 #: seeds (200-259) they hold 18 frames more than 1 px off reported ok, and 6 within it.
 MIN_RESOLVED_CONTRAST = 6.0
+#: An answer farther than this (px) from both the constant-velocity prediction and the last position is
+#: another minimum of the cost than the one the track was in: a followed object sits within a pixel of
+#: its prediction, and a change of speed the registration follows from there moves it at most this far
+#: (:data:`~semlab.tracking.ic.STEADY_MAX_MOVE_PX`), or as far as the track expected it to move in
+#: the frame (an object may stop or double its speed: the real needle of ``contact_brightness_seq``
+#: slows from 10 px a frame to 5 as it bends at contact). There the match's score must vouch for it
+#: (:func:`ambiguous_jump`): with the tip hidden under a passing occluder the whole-frame search finds
+#: the shaft tens of px along its axis, as well matched as the hidden tip's frames around it and far
+#: below the track's typical match.
+AMBIGUOUS_JUMP_PX = 3.0
 
 
 #: The clustered covariance (:func:`clustered_covariance`) groups the band's pixels in tiles of this
@@ -309,6 +324,15 @@ def unresolved(contrast_noise: float, limit: float = MIN_RESOLVED_CONTRAST) -> b
     background (``contrast_noise``: its contrast over the smoothed noise, infinite for a noiseless
     frame; not a number counts as unresolved)."""
     return not contrast_noise >= limit
+
+
+def ambiguous_jump(jump_px: float, score: float, typical_score: float | None,
+                   limit_px: float = AMBIGUOUS_JUMP_PX) -> bool:
+    """Whether an answer ``jump_px`` off the track (from both its prediction and its last position) is
+    another minimum of the cost that its match does not vouch for: farther than ``limit_px``, with a
+    ``score`` under the track's
+    ``typical_score`` (None: no typical score yet, nothing to judge by)."""
+    return typical_score is not None and jump_px > limit_px and not score >= typical_score
 
 
 def too_uncertain(sigma: tuple[float, float], limit: float = SIGMA_LIMIT_PX) -> bool:
