@@ -11,7 +11,7 @@ from scipy.special import erf
 from test_track_uncertainty import CENTRE, ROI, wedge_frame
 
 from semlab.template import identify_contour_template
-from semlab.tracking import Tracker
+from semlab.tracking import Tracker, attached
 from semlab.tracking.attached import (
     BAND_CLEARANCE_PX,
     apex_bumps,
@@ -191,6 +191,57 @@ def test_a_static_particle_at_the_apex_no_longer_holds_the_probe_back():
     particle = {"at": AT_APEX}
     cut, kept = _worst_error(particle), _worst_error(particle, cut_attached=False)
     assert cut < 0.6 < kept
+
+
+#: A particle brighter than the probe's plateau on its upper flank: blurred, its median is 0.9-1 of the
+#: probe's contrast, as bright as the probe.
+AS_BRIGHT = {"at": (85.0, 84.8), "radius": 6.0, "level": 1.2}
+
+
+def test_a_disc_as_bright_as_the_probe_is_cut(monkeypatch):
+    patch = _roi(_with_particle(**AS_BRIGHT))
+    region = identify_contour_template(patch).region
+    pieces = attached_pieces(region, patch)
+    ys, xs = np.nonzero(pieces)
+    assert xs.size and math.dist((xs.mean() + ROI[0], ys.mean() + ROI[1]), AS_BRIGHT["at"]) < AS_BRIGHT["radius"]
+    # Judged by its level alone, it would be the probe's own material and stay.
+    monkeypatch.setattr(attached, "MAX_BRIGHT_LEVEL", attached.MAX_RELATIVE_LEVEL)
+    assert not attached_pieces(region, patch).any()
+
+
+@pytest.mark.parametrize("seed", [251, 282, 291])
+def test_the_ends_of_gripper_jaws_are_not_taken_for_bright_particles(seed, monkeypatch):
+    # Spare seeds of the corpus's shapes family: a gripper's jaws, whose ends the openings shave into pieces
+    # as bright as the probe. They are squares or narrower, not discs: none is cut. Without the roundness
+    # asked of a bright piece, 70-159 px of them would be.
+    from semlab.evaluation import make_family_sequence
+
+    seq = make_family_sequence("shapes", seed)
+    x, y, w, h = seq.roi
+    patch = np.asarray(seq.frames[0])[y:y + h, x:x + w]
+    region = identify_contour_template(patch, **Tracker().options.template.as_kwargs()).region
+    bright_cut = attached_pieces(region, patch).sum()
+    monkeypatch.setattr(attached, "MIN_BRIGHT_ROUNDNESS", 0.0)
+    assert attached_pieces(region, patch).sum() >= bright_cut + 50
+
+
+@pytest.mark.slow
+def test_a_bright_particle_on_the_flank_no_longer_holds_the_probe_back(monkeypatch):
+    # Spare seed 294 of the charging family (not a test seed): a particle at 0.96 of the probe's contrast
+    # touches its upper flank in frame 0. Kept, it held the track 2-5 px back on 35 frames reported ok.
+    from semlab.evaluation import make_family_sequence
+    from semlab.evaluation.scoring import frame_errors
+    from semlab.tracking import track
+
+    seq = make_family_sequence("gray_charging", 294)
+
+    def silent():
+        err = frame_errors(track(seq.frames, seq.roi), seq.truth, seq.roi)
+        return int((err["ok"] & (np.hypot(err["ex"], err["ey"]) > 1.0)).sum())
+
+    assert silent() == 0
+    monkeypatch.setattr(attached, "MAX_BRIGHT_LEVEL", attached.MAX_RELATIVE_LEVEL)
+    assert silent() >= 20
 
 
 def _bar(width, length=70, angle_deg=20.0, shape=(120, 120)):

@@ -16,7 +16,8 @@ particle's size (up to :data:`MAX_PIECE_PX`), away from the apex (the region's p
 where it enters the ROI, which the opening also shaves: a wedge's tip is a compact piece too) and from the ROI's border, and dimmer
 than the probe (:data:`MAX_RELATIVE_LEVEL` of the probe's contrast over the background: another
 material or a rounded particle, where a gripper's jaw or a blunt tip's corner, which the opening
-also takes off, is the probe's own material). Such a piece is cut off the region
+also takes off, is the probe's own material), or as bright as the probe and disc-like
+(:data:`MIN_BRIGHT_ROUNDNESS`: a jaw's end is square or narrower). Such a piece is cut off the region
 (:func:`without_attached`) and the band keeps :data:`BAND_CLEARANCE_PX` away from it. Only where
 the outline is resolved above the noise (:data:`MAX_OUTLINE_NOISE` of the contrast): at low dose
 the noise itself makes bumps of the region's outline.
@@ -76,6 +77,14 @@ MAX_PIECE_PX = 160
 #: contrast over the background is the probe's own material; particles touching the probe on the
 #: development scenes are at 0.45-0.87 of it, gripper jaws' tips at 0.9-1.2.
 MAX_RELATIVE_LEVEL = 0.9
+#: ... up to this fraction (as bright as the probe), a piece is still a particle when it is disc-like: it
+#: fills at least :data:`MIN_BRIGHT_ROUNDNESS` of its enclosing circle. The ends of gripper jaws that the
+#: openings shave are squares or narrower (a square fills 2/π ≈ 0.64; 0.41-0.71 on the corpus's gripper
+#: scenes, spare seeds 251, 282, 291), bright particles on a flank 0.79-0.88 (a pixelated disc; spare seeds
+#: of the charging, clutter and wander families, whose particles at 0.91-0.99 of the probe held it back
+#: by up to 3 px).
+MAX_BRIGHT_LEVEL = 1.0
+MIN_BRIGHT_ROUNDNESS = 0.75
 #: The band keeps this many px away from a cut piece: the particle's blurred rim reaches that far.
 BAND_CLEARANCE_PX = 4
 #: The cut only where the smoothed noise is at most this fraction of the object's contrast (0.02-0.045
@@ -282,13 +291,17 @@ def _round(piece, area: int, min_roundness: float) -> bool:
 def _is_particle(piece, area: int, opening: Opening, to_apex, smoothed, levels) -> bool:
     """Whether a particle-sized shaved ``piece`` of ``area`` px is an attached particle: more than
     the opening's clearance from the apex (``to_apex``: every pixel's distance to it; None: no
-    apex), round enough, and dimmer than the probe (``levels``: the probe's and the background's)."""
+    apex), round enough, and dimmer than the probe (``levels``: the probe's and the background's), or
+    as bright as the probe and disc-like."""
     if to_apex is not None and float(to_apex[piece].min()) <= opening.apex_clearance:
         return False
     if not _round(piece, area, opening.min_roundness):
         return False
     probe, background = levels
-    return (float(np.median(smoothed[piece])) - background) / (probe - background) < MAX_RELATIVE_LEVEL
+    level = (float(np.median(smoothed[piece])) - background) / (probe - background)
+    if level < MAX_RELATIVE_LEVEL:
+        return True
+    return level < MAX_BRIGHT_LEVEL and _round(piece, area, MIN_BRIGHT_ROUNDNESS)
 
 
 def without_attached(contour: ContourTemplate, patch, *,
