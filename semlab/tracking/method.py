@@ -38,6 +38,8 @@ class Motion:
     prediction_error : float
         How far (px) the last answer was from its prediction (inf after a loss or a
         re-acquisition).
+    miss : float
+        How far (px) the last answer was from its prediction, re-acquired or not (inf after a loss).
     """
 
     shift: np.ndarray = field(default_factory=lambda: np.zeros(2))
@@ -45,6 +47,7 @@ class Motion:
     lost: bool = False
     n_lost: int = 0
     prediction_error: float = np.inf
+    miss: float = np.inf
 
 
 @dataclass(frozen=True)

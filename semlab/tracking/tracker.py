@@ -384,11 +384,14 @@ class Tracker:
             return self._lose(verdict.reason)
         motion = self.motion
         missed = float(np.hypot(*(verdict.shift - predicted)))
-        motion.prediction_error = np.inf if verdict.reacquired else missed
         # Off the track: as far from where it was last as from where it was heading (a frame after a
-        # jump is predicted as far again), and farther than the move it was expected to make.
+        # jump is predicted as far again), and farther than the move it was expected to make, which
+        # only a track that was steady last frame (its prediction held) expects.
         jump = min(missed, float(np.hypot(*(verdict.shift - motion.shift))))
-        expected = float(np.hypot(*(predicted - motion.shift)))
+        steady = motion.miss <= (self.options.loss.max_poor_jump or 0.0)
+        expected = float(np.hypot(*(predicted - motion.shift))) if steady else 0.0
+        motion.prediction_error = np.inf if verdict.reacquired else missed
+        motion.miss = missed
         result = self._accept(verdict.shift, verdict.score)
         uncertainty = self.algorithm.sigma(verdict)
         moved = self.algorithm.after_accept(arr, verdict)
@@ -428,7 +431,8 @@ class Tracker:
     def _doubt_jump(self, jump: float, expected: float, score: float) -> str | None:
         """Why an answer ``jump`` px from the prediction and the last position, at a match of ``score``, is
         ambiguous, or None: farther than :attr:`options`' ``max_poor_jump`` and than the ``expected`` move
-        (px; an object may stop, or double its speed, in a frame), at a match under the track's typical
+        (px; an object may stop, or double its speed, in a frame; 0 after a jump, whose speed is no
+        motion to extrapolate), at a match under the track's typical
         one (:func:`~semlab.tracking.uncertainty.ambiguous_jump`; methods that judge their answers only)."""
         if self.options.loss.max_poor_jump is None or not self.algorithm.flags_uncertain:
             return None
@@ -440,7 +444,7 @@ class Tracker:
 
     def _lose(self, reason: str) -> TrackResult:
         motion = self.motion
-        motion.prediction_error = np.inf
+        motion.prediction_error = motion.miss = np.inf
         motion.lost = True
         motion.n_lost += 1
         motion.velocity[:] = 0.0

@@ -117,8 +117,9 @@ MIN_RESOLVED_CONTRAST = 6.0
 #: another minimum of the cost than the one the track was in: a followed object sits within a pixel of
 #: its prediction, and a change of speed the registration follows from there moves it at most this far
 #: (:data:`~semlab.tracking.ic.STEADY_MAX_MOVE_PX`), or as far as the track expected it to move in
-#: the frame (an object may stop or double its speed: the real needle of ``contact_brightness_seq``
-#: slows from 10 px a frame to 5 as it bends at contact). There the match's score must vouch for it
+#: the frame when its last prediction held (an object may stop or double its speed: the real needle of
+#: ``contact_brightness_seq`` slows from 10 px a frame to 5 as it bends at contact; after a jump the
+#: speed is no motion to extrapolate). There the match's score must vouch for it
 #: (:func:`ambiguous_jump`): with the tip hidden under a passing occluder the whole-frame search finds
 #: the shaft tens of px along its axis, as well matched as the hidden tip's frames around it and far
 #: below the track's typical match.
