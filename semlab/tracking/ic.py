@@ -167,7 +167,9 @@ class ICMethod(Method):
 
     def good(self, fit) -> bool:
         typical = self.typical_score()
-        return fit is not None and fit.converged and fit.score >= max(self.threshold(), 1.0 if typical is None else typical)
+        # Before frame 1 has a score, no fit from the prediction is good enough to skip the search.
+        bar = max(self.threshold(), 1.0 if typical is None else typical)
+        return fit is not None and fit.converged and fit.score >= bar
 
     def search(self, arr, window, predicted, fit) -> FitResult:
         """A jump, a poor match or a lost target: the coarse search over the window, and the better

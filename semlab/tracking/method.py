@@ -49,6 +49,19 @@ class Motion:
     prediction_error: float = np.inf
     miss: float = np.inf
 
+    def record_miss(self, shift, predicted, reacquired: bool, steady_px: float) -> tuple[float, float]:
+        """Note how far the accepted ``shift`` is from its ``predicted`` one, and return ``(off, expected)``
+        (px): how far it is off the track, from both the prediction and the last position (a frame after
+        a jump is predicted as far again), and the move the track expected, its speed when its last
+        prediction held to ``steady_px`` (0 after a jump, whose speed is no motion to extrapolate).
+        Called before the state moves on to ``shift``."""
+        missed = float(np.hypot(*(np.asarray(shift, float) - predicted)))
+        off = min(missed, float(np.hypot(*(np.asarray(shift, float) - self.shift))))
+        expected = float(np.hypot(*(predicted - self.shift))) if self.miss <= steady_px else 0.0
+        self.prediction_error = np.inf if reacquired else missed
+        self.miss = missed
+        return off, expected
+
 
 @dataclass(frozen=True)
 class Verdict:

@@ -383,15 +383,8 @@ class Tracker:
         if not verdict.ok:
             return self._lose(verdict.reason)
         motion = self.motion
-        missed = float(np.hypot(*(verdict.shift - predicted)))
-        # Off the track: as far from where it was last as from where it was heading (a frame after a
-        # jump is predicted as far again), and farther than the move it was expected to make, which
-        # only a track that was steady last frame (its prediction held) expects.
-        jump = min(missed, float(np.hypot(*(verdict.shift - motion.shift))))
-        steady = motion.miss <= (self.options.loss.max_poor_jump or 0.0)
-        expected = float(np.hypot(*(predicted - motion.shift))) if steady else 0.0
-        motion.prediction_error = np.inf if verdict.reacquired else missed
-        motion.miss = missed
+        jump, expected = motion.record_miss(verdict.shift, predicted, verdict.reacquired,
+                                            self.options.loss.max_poor_jump or 0.0)
         result = self._accept(verdict.shift, verdict.score)
         uncertainty = self.algorithm.sigma(verdict)
         moved = self.algorithm.after_accept(arr, verdict)
@@ -429,18 +422,17 @@ class Tracker:
         return None
 
     def _doubt_jump(self, jump: float, expected: float, score: float) -> str | None:
-        """Why an answer ``jump`` px from the prediction and the last position, at a match of ``score``, is
-        ambiguous, or None: farther than :attr:`options`' ``max_poor_jump`` and than the ``expected`` move
-        (px; an object may stop, or double its speed, in a frame; 0 after a jump, whose speed is no
-        motion to extrapolate), at a match under the track's typical
-        one (:func:`~semlab.tracking.uncertainty.ambiguous_jump`; methods that judge their answers only)."""
+        """Why an answer ``jump`` px off the track, at a match of ``score``, is ambiguous, or None:
+        farther than :attr:`options`' ``max_poor_jump`` and than the ``expected`` move
+        (:meth:`~semlab.tracking.method.Motion.record_miss`), at a match under the track's typical one
+        (:func:`~semlab.tracking.uncertainty.ambiguous_jump`; methods that judge their answers only)."""
         if self.options.loss.max_poor_jump is None or not self.algorithm.flags_uncertain:
             return None
         limit, typical = max(self.options.loss.max_poor_jump, expected), self.algorithm.typical_score()
         if not ambiguous_jump(jump, score, typical, limit):
             return None
-        return (f"ambiguous: {jump:.1f} px off the track > {limit:.1f} px (max_poor_jump or the expected move), "
-                f"at a match scoring {score:.2f} < the track's typical {typical:.2f}")
+        return (f"ambiguous: {jump:.1f} px off the track > {limit:.1f} px (max_poor_jump or the "
+                f"expected move), at a match scoring {score:.2f} < the track's typical {typical:.2f}")
 
     def _lose(self, reason: str) -> TrackResult:
         motion = self.motion
