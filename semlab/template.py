@@ -15,7 +15,8 @@ from skimage.filters import threshold_multiotsu
 
 from .roi import as_gray_float
 
-__all__ = ["CONTOUR_CHOICES", "ContourTemplate", "identify_contour_template", "to_uint8"]
+__all__ = ["CONTOUR_CHOICES", "ContourTemplate", "brightest_of_three", "edge_strength", "identify_contour_template",
+           "to_uint8"]
 
 #: Which external contour is the object (step 5): ``"largest"``, the paper's (Fig. 2), or
 #: ``"central"``, the one holding the ROI's centre (where the user clicked), else the nearest to it.
@@ -28,6 +29,9 @@ MIN_CENTRAL_AREA_FRACTION = 0.1
 #: substrate too (a bright surface the probe reaches over, merged with it at Otsu's level), and the
 #: brightest of three Otsu classes is taken instead (:func:`skimage.filters.threshold_multiotsu`).
 MAX_CENTRAL_REGION_FRACTION = 0.5
+#: The edge strength of a contour is read this many px inside the ROI (where the object leaves the ROI
+#: its contour runs along the border, on no edge).
+EDGE_READ_MARGIN_PX = 3
 
 
 @dataclass
@@ -153,7 +157,7 @@ def identify_contour_template(image, *, sigma: float = 2.0, threshold: float | N
     if threshold is None:
         found.otsu_classes = 2
     if threshold is None and choose == "central" and found.region.mean() > MAX_CENTRAL_REGION_FRACTION:
-        found = _brightest_of_three(smoothed, bright_object, morph_kernel, morph_iterations) or found
+        found = brightest_of_three(smoothed, bright_object, morph_kernel, morph_iterations) or found
     if found.area < 4.0:
         raise ValueError(f"the {choose} contour in the ROI encloses less than 4 px²: no usable template")
     return found
@@ -190,8 +194,8 @@ def _segment(smoothed, threshold, bright_object: bool, morph_kernel: int, morph_
                            area=float(cv2.contourArea(contours[best])))
 
 
-def _brightest_of_three(smoothed, bright_object: bool, morph_kernel: int,
-                        morph_iterations: int) -> ContourTemplate | None:
+def brightest_of_three(smoothed, bright_object: bool, morph_kernel: int,
+                       morph_iterations: int) -> ContourTemplate | None:
     """The central contour at the level between the brightest of three Otsu classes and the rest
     (the darkest's, for a dark object); None when there are no three levels or no contour of at
     least 4 px² at that level."""
@@ -203,6 +207,20 @@ def _brightest_of_three(smoothed, bright_object: bool, morph_kernel: int,
         return None
     found.otsu_classes = 3
     return found if found.area >= 4.0 else None
+
+
+def edge_strength(smoothed, mask) -> float:
+    """Mean gradient magnitude (gray levels per px) of ``smoothed`` along the contour ``mask``, the
+    largest within a pixel of each contour pixel (a threshold's contour is not the steepest point of
+    the edge), read :data:`EDGE_READ_MARGIN_PX` inside the ROI; 0 when no contour pixel is there."""
+    img = np.asarray(smoothed, np.float32)
+    gx = cv2.Sobel(img, cv2.CV_32F, 1, 0, ksize=3) / 8.0
+    gy = cv2.Sobel(img, cv2.CV_32F, 0, 1, ksize=3) / 8.0
+    steepest = cv2.dilate(np.hypot(gx, gy), np.ones((3, 3), np.uint8))
+    m = EDGE_READ_MARGIN_PX
+    read = np.zeros(img.shape, bool)
+    read[m:-m, m:-m] = np.asarray(mask, bool)[m:-m, m:-m]
+    return float(steepest[read].mean()) if read.any() else 0.0
 
 
 def _chosen_contour(contours, external, shape, choose: str) -> int:

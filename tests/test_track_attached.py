@@ -7,6 +7,7 @@ import math
 import cv2
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 from scipy.special import erf
 from test_track_uncertainty import CENTRE, ROI, wedge_frame
 
@@ -16,6 +17,7 @@ from semlab.tracking.attached import (
     BAND_CLEARANCE_PX,
     apex_bumps,
     attached_pieces,
+    substrate_pieces,
     without_attached,
 )
 
@@ -273,3 +275,79 @@ def test_gripper_jaws_and_the_real_needle_lose_no_piece_at_the_apex(family, seed
     patch = np.asarray(seq.frames[0])[y:y + h, x:x + w]
     region = identify_contour_template(patch, **Tracker().options.template.as_kwargs()).region
     assert not apex_bumps(region).any()
+
+
+def _grains_and_bar(seed, *, shading=0.0, textured=True, shape=(120, 120)):
+    """A bar (level 140, :func:`_bar` of 14 px) over a substrate of grains (a Voronoi tiling, levels
+    40-115), or over a flat one (60); ``shading`` darkens the bar across its width by that fraction.
+    Blurred by 0.7 px, Gaussian noise of 4 gray levels. Returns the ROI (uint8) and the bar's mask."""
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[:shape[0], :shape[1]]
+    if textured:
+        seeds, levels = rng.uniform(0, shape[0], (60, 2)), rng.uniform(40.0, 115.0, 60)
+        _, nearest = cKDTree(seeds).query(np.column_stack([xx.ravel(), yy.ravel()]))
+        img = levels[nearest].reshape(shape)
+    else:
+        img = np.full(shape, 60.0)
+    bar = _bar(14, shape=shape)
+    a = math.radians(20.0)
+    across = -(shape[1] - 1 - xx) * math.sin(a) + (yy - 60) * math.cos(a)
+    img[bar] = (140.0 * (1.0 - shading * (across + 7.0) / 14.0))[bar]
+    img = cv2.GaussianBlur(img, (0, 0), 0.7) + rng.normal(0.0, 4.0, shape)
+    return np.clip(np.rint(img), 0, 255).astype(np.uint8), bar
+
+
+@pytest.mark.parametrize("seed", [1, 4, 6, 8])
+def test_grains_that_otsus_level_joins_to_the_probe_are_cut(seed):
+    # Over grains of 40-115 gray levels Otsu's threshold (84-87) lies below the brightest grains, and the
+    # central region holds the bar and the grains touching it (0.5-6x the bar's own area). The brightest
+    # of three classes lies on the bar's stronger edges: what Otsu's region holds beyond it is cut, and
+    # nothing of the bar.
+    patch, bar = _grains_and_bar(seed)
+    contour = identify_contour_template(patch, choose="central")
+    extra = contour.region & ~bar
+    assert contour.otsu_classes == 2 and (contour.region & bar).sum() > 0.9 * bar.sum() and extra.sum() > 0.4 * bar.sum()
+    pieces = substrate_pieces(contour)
+    near_bar = cv2.dilate(bar.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+    assert not (pieces & near_bar).any() and pieces.sum() > 0.4 * extra.sum()
+    cut, _ = without_attached(contour, patch, choose="central")
+    assert (cut.region & ~bar).sum() < 0.5 * extra.sum() and (cut.region & bar).sum() > 0.9 * bar.sum()
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_a_shaded_probe_over_a_flat_substrate_loses_nothing(seed):
+    # The bar darkens to 55 % across its width: the brightest of three classes takes its bright half only,
+    # and its contour, across the bar's smooth inside, lies on weaker edges than Otsu's.
+    patch, _ = _grains_and_bar(seed, shading=0.45, textured=False)
+    contour = identify_contour_template(patch, choose="central")
+    assert not substrate_pieces(contour).any()
+
+
+def test_only_otsus_level_is_judged():
+    patch, _ = _grains_and_bar(1)
+    given = identify_contour_template(patch, choose="central", threshold=86)
+    assert given.otsu_classes is None and not substrate_pieces(given).any()
+
+
+@pytest.mark.slow
+def test_substrate_joined_to_the_probe_no_longer_holds_it_back(monkeypatch):
+    # Substrates spare seed 248: Otsu's region in frame 0 is 6.5x the probe's (the grains around it); kept,
+    # they hold the track back by 2 px with ok on 34 frames. Cut, no frame is silent.
+    from semlab.evaluation import make_family_sequence
+
+    seq = make_family_sequence("substrates", 248)
+
+    def silent():
+        t = Tracker()
+        r0 = t.init(seq.frames[0], seq.roi)
+        truth = seq.truth
+        count = 0
+        for k in range(1, len(seq.frames)):
+            r = t.update(seq.frames[k])
+            err = math.hypot(r.x - r0.x - (truth.x[k] - truth.x[0]), r.y - r0.y - (truth.y[k] - truth.y[0]))
+            count += bool(r.ok and truth.visible[k] and err > 1.0)
+        return count
+
+    assert silent() == 0
+    monkeypatch.setattr(attached, "substrate_pieces", lambda contour, **_: np.zeros(contour.region.shape, bool))
+    assert silent() >= 20

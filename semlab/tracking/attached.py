@@ -33,6 +33,18 @@ gripper's gap does not) and the tip is thin (:data:`MAX_WEDGE_HALF_WIDTH_PX`; a 
 both axes by itself). Left in the template, such a particle holds the answer back along the shaft,
 where only the apex tells the position, by a pixel or more with a good score (the corpus's clutter
 family at low beam current: ``benchmarks/bench_corpus.py``).
+
+Over a textured substrate Otsu's level, pulled down by the many background pixels, joins the bright
+grains beside the probe to it: the region reaches over them, often by more than the probe's own area
+(:func:`substrate_pieces`). The brightest of three Otsu classes (Liao et al. 2001) then separates the
+probe from them, and its contour runs along the probe's edges, stronger than the grains' fainter
+ones (:func:`~semlab.template.edge_strength`). What Otsu's region holds beyond
+:data:`SUBSTRATE_REACH_PX` of that class's region, where it is thicker than an edge's transition
+(:data:`SUBSTRATE_MIN_THICKNESS_PX`), is substrate and is cut, apart from what lies within
+:data:`BAND_CLEARANCE_PX` of a particle the cut above takes (a particle at a thin tip's apex: the
+tip's end beside it, dimmer than its shaft, is below the brightest class's level, and stays). Where the brightest class only cuts a
+shaded probe in two, its contour runs across the probe's smooth inside, on weaker edges than Otsu's,
+and nothing is cut.
 """
 
 from __future__ import annotations
@@ -43,9 +55,10 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 
-from ..template import ContourTemplate, identify_contour_template
+from ..template import ContourTemplate, brightest_of_three, edge_strength, identify_contour_template
 
-__all__ = ["BAND_CLEARANCE_PX", "MAX_OUTLINE_NOISE", "apex_bumps", "attached_pieces", "clear_band", "without_attached"]
+__all__ = ["BAND_CLEARANCE_PX", "MAX_OUTLINE_NOISE", "apex_bumps", "attached_pieces", "clear_band", "substrate_pieces",
+           "without_attached"]
 
 
 class Opening(NamedTuple):
@@ -85,8 +98,12 @@ MAX_RELATIVE_LEVEL = 0.9
 #: by up to 3 px).
 MAX_BRIGHT_LEVEL = 1.0
 MIN_BRIGHT_ROUNDNESS = 0.75
-#: The band keeps this many px away from a cut piece: the particle's blurred rim reaches that far.
+#: The band keeps this many px away from a cut piece: the particle's blurred rim reaches that far...
 BAND_CLEARANCE_PX = 4
+#: ... unless that leaves fewer than this many px on its background side (:func:`clear_band`): as many as a
+#: whole band needs (:data:`semlab.tracking.band.MIN_BAND_PIXELS`). Substrates spare seed 219 registers
+#: well on the 92 of its 1404 it keeps.
+MIN_CLEARED_BACKGROUND_PX = 30
 #: The cut only where the smoothed noise is at most this fraction of the object's contrast (0.02-0.045
 #: on the development scenes at standard dose, 0.08-0.17 at low dose, where noise bumps the outline).
 MAX_OUTLINE_NOISE = 0.06
@@ -113,6 +130,12 @@ BUMP_REACH_PX = 25.0
 #: blunt end's corner outside a tapering fit 0.16, the outline's noise at low dose 0.09-0.14.
 MIN_BUMP_PX = 15
 MIN_BUMP_ROUNDNESS = 0.3
+#: Otsu's region is substrate where it lies more than this many px from the brightest Otsu class's region
+#: (the probe's edge, blurred by the beam and the smoothing, spans the two levels within that)...
+SUBSTRATE_REACH_PX = 2
+#: ... and is at least this many px thick there (a grain; the outline's slivers along an edge and a thin
+#: tip's end, dimmer than its shaft, are narrower).
+SUBSTRATE_MIN_THICKNESS_PX = 2
 #: The probe's and the background's levels: this far (px) inside the region, and outside it.
 LEVEL_MARGIN_PX = 3
 LEVEL_SMOOTHING_PX = 1.0
@@ -201,6 +224,35 @@ def attached_pieces(region, patch) -> np.ndarray:
     if apex is not None:
         cut |= apex_bumps(region, apex)
     return cut
+
+
+def substrate_pieces(contour: ContourTemplate, *, bright_object: bool = True, morph_kernel: int = 3,
+                     morph_iterations: int = 1) -> np.ndarray:
+    """The parts of the substrate that Otsu's region joined to the probe (see the module docstring).
+
+    Parameters
+    ----------
+    contour : ContourTemplate
+        Frame 0's contour template; only one found at Otsu's level (``otsu_classes == 2``) is judged.
+    bright_object, morph_kernel, morph_iterations
+        As it was identified with (:func:`~semlab.template.identify_contour_template`).
+
+    Returns
+    -------
+    (h, w) ndarray of bool
+        The pixels to cut (all False when there are none).
+    """
+    none = np.zeros(contour.region.shape, bool)
+    if contour.otsu_classes != 2:
+        return none
+    brightest = brightest_of_three(contour.smoothed, bright_object, morph_kernel, morph_iterations)
+    if brightest is None or not (edge_strength(contour.smoothed, brightest.mask)
+                                 > edge_strength(contour.smoothed, contour.mask)):
+        return none
+    near = cv2.dilate(brightest.region.astype(np.uint8), _disc(SUBSTRATE_REACH_PX)).astype(bool)
+    beyond = (contour.region & ~near).astype(np.uint8)
+    thick = cv2.morphologyEx(beyond, cv2.MORPH_OPEN, _disc(SUBSTRATE_MIN_THICKNESS_PX))
+    return cv2.dilate(thick, _disc(SUBSTRATE_MIN_THICKNESS_PX)).astype(bool) & beyond.astype(bool)
 
 
 def _wedge(region: np.ndarray, apex: tuple[int, int]) -> np.ndarray | None:
@@ -304,13 +356,17 @@ def _is_particle(piece, area: int, opening: Opening, to_apex, smoothed, levels) 
     return level < MAX_BRIGHT_LEVEL and _round(piece, area, MIN_BRIGHT_ROUNDNESS)
 
 
-def without_attached(contour: ContourTemplate, patch, *,
-                     choose: str = "central") -> tuple[ContourTemplate, np.ndarray | None]:
-    """``(contour, pieces)``: the contour template with its attached particles cut off the region
-    (the external contour of what remains that ``choose`` picks, as in
-    :func:`~semlab.template.identify_contour_template`), and their pixels; ``(contour, None)``
-    unchanged when there are none."""
-    pieces = attached_pieces(contour.region, patch)
+def without_attached(contour: ContourTemplate, patch, *, choose: str = "central", outline_resolved: bool = True,
+                     **segmentation) -> tuple[ContourTemplate, np.ndarray | None]:
+    """``(contour, pieces)``: the contour template with the substrate Otsu's level joined to it
+    (:func:`substrate_pieces`, given the ``segmentation``'s ``bright_object``, ``morph_kernel`` and
+    ``morph_iterations``) and, where its outline is resolved above the noise (``outline_resolved``:
+    see :data:`MAX_OUTLINE_NOISE`), its attached particles cut off the region (the external contour of
+    what remains that ``choose`` picks, as in :func:`~semlab.template.identify_contour_template`), and
+    the pixels cut; ``(contour, None)`` unchanged when there are none."""
+    particles = attached_pieces(contour.region, patch) if outline_resolved else np.zeros(contour.region.shape, bool)
+    beside = cv2.dilate(particles.astype(np.uint8), _disc(BAND_CLEARANCE_PX)).astype(bool)
+    pieces = particles | (substrate_pieces(contour, **segmentation) & ~beside)
     if not pieces.any():
         return contour, None
     # One px more than the piece: the neck that joined it goes too.
@@ -325,9 +381,19 @@ def without_attached(contour: ContourTemplate, patch, *,
     return cut, pieces
 
 
-def clear_band(band, pieces) -> np.ndarray:
-    """``band`` without the pixels within :data:`BAND_CLEARANCE_PX` of ``pieces`` (None: unchanged)."""
+def clear_band(band, pieces, region=None) -> np.ndarray:
+    """``band`` without the pixels within :data:`BAND_CLEARANCE_PX` of ``pieces`` (None: unchanged).
+
+    With the object's ``region``, the band is left whole when clearing it would keep fewer than
+    :data:`MIN_CLEARED_BACKGROUND_PX` pixels on its background side: a probe lying along the substrate
+    it was cut from would have no edge left to register.
+    """
     if pieces is None:
         return band
     near = cv2.dilate(np.asarray(pieces, np.uint8), _disc(BAND_CLEARANCE_PX)).astype(bool)
-    return band & ~near
+    cleared = band & ~near
+    if region is not None:
+        background = ~np.asarray(region, bool)
+        if (cleared & background).sum() < MIN_CLEARED_BACKGROUND_PX:
+            return band
+    return cleared

@@ -34,6 +34,9 @@ MIN_ROI_PX = 16
 #: smoothed ROI it was found in (a 3σ separation of the object's and the background's levels: below,
 #: Otsu's threshold splits noise).
 MIN_CONTRAST_NOISE = 3.0
+#: The template options the cut of attached pieces needs to find the brightest Otsu class as frame 0's
+#: contour was found (:func:`~semlab.tracking.attached.substrate_pieces`).
+SEGMENTATION_KEYS = ("bright_object", "morph_kernel", "morph_iterations")
 #: A frame must exceed the ROI by this many px (each dimension) to be searched.
 FRAME_OVER_ROI_PX = 4
 #: What a method may raise on a frame it cannot handle: the frame is lost, never the run.
@@ -230,11 +233,13 @@ class Tracker:
         self.edge_sigma = edge_blur(patch, contour, contrast)
         widths = self.band_widths()
         attached = None
-        # The cut only where the region's bumps are the scene's, not the noise's.
-        if (METHOD_CLASSES[self.method].cuts_attached and self.options.band.cut_attached
-                and self.contrast_noise * MAX_OUTLINE_NOISE >= 1.0):
-            contour, attached = without_attached(contour, raw, choose=self.options.template.choose)
-        band = clear_band(registration_band(contour, widths), attached)
+        if METHOD_CLASSES[self.method].cuts_attached and self.options.band.cut_attached:
+            segmentation = self.options.template.as_kwargs()
+            # Particles only where the region's bumps are the scene's, not the noise's.
+            contour, attached = without_attached(contour, raw, choose=segmentation["choose"],
+                                                 outline_resolved=self.contrast_noise * MAX_OUTLINE_NOISE >= 1.0,
+                                                 **{k: segmentation[k] for k in SEGMENTATION_KEYS})
+        band = clear_band(registration_band(contour, widths), attached, contour.region)
         if band.sum() < MIN_BAND_PIXELS:
             raise ValueError(f"the contour template in ROI {roi} leaves {int(band.sum())} band pixels away from "
                              f"the ROI border, fewer than {MIN_BAND_PIXELS}: enlarge the ROI or move it onto the tip")
