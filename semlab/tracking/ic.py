@@ -16,7 +16,14 @@ import numpy as np
 
 from ..template import identify_contour_template
 from .averaging import TemplateAverager, consistency_weights, store_frame
-from .band import MIN_BAND_PIXELS, build_band_model, region_contrast, registration_band
+from .band import (
+    FLAT_BACKGROUND_TEXTURE,
+    MIN_BAND_PIXELS,
+    build_band_model,
+    flattened_background,
+    region_contrast,
+    registration_band,
+)
 from .consistency import band_quadrants, quadrant_influence
 from .method import Method, Motion, Setup, Verdict
 from .registration import FitResult, Start, register
@@ -67,6 +74,9 @@ class ICMethod(Method):
     def start(self, setup: Setup) -> None:
         super().start(setup)
         self.noise, self.widths, self.to_8bit = setup.noise, setup.widths, setup.to_8bit
+        #: The template's background is flattened for the band model (:func:`~semlab.tracking.band.
+        #: flattened_background`) over a strongly textured substrate.
+        self.flatten = setup.texture >= FLAT_BACKGROUND_TEXTURE
         self.rho = setup.noise.rho if self.options.photometry.whiten else 0.0
         self.n_averaged = 1
         #: Covariance (px²) of the origin, frame 0's shift against the current template (0 while
@@ -90,7 +100,8 @@ class ICMethod(Method):
 
     def _build(self) -> None:
         """The band model and the coarse template of the current template (offline)."""
-        self.model = build_band_model(self.template, self.contour, self.band, self.noise, self.options,
+        template = flattened_background(self.template, self.contour.region) if self.flatten else self.template
+        self.model = build_band_model(template, self.contour, self.band, self.noise, self.options,
                                       n_averaged=self.n_averaged, consistency=self.consistency)
         factor = self.options.search.coarse_factor
         if self._coarse_mask is None:  # made once per contour: frame 0's, then the averaged template's

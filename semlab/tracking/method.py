@@ -108,6 +108,8 @@ class Setup:
         The frames' noise as the method uses it.
     to_8bit : (float, float)
         ``(low, scale)``: how the contour identification mapped frame 0's gray levels on 0-255.
+    texture : float
+        The background's texture over the noise (:func:`semlab.tracking.band.background_texture`).
     """
 
     image: np.ndarray
@@ -118,6 +120,7 @@ class Setup:
     widths: tuple[int, int]
     noise: NoiseModel
     to_8bit: tuple[float, float]
+    texture: float = 0.0
 
 
 class Method:

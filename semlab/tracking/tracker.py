@@ -246,7 +246,7 @@ class Tracker:
         if not (self.options.photometry.whiten or self.options.photometry.noise_weights):
             noise = NoiseModel()
         algorithm = METHOD_CLASSES[self.method](self.options)
-        algorithm.start(Setup(image, roi, patch, contour, band, widths, noise, to_8bit))
+        algorithm.start(Setup(image, roi, patch, contour, band, widths, noise, to_8bit, self.texture))
         self.algorithm, self.noise, self.roi, self.attached = algorithm, noise, roi, attached
         self.motion = Motion()
         self.centre0 = np.array(roi_centre(roi))
