@@ -7,6 +7,7 @@ import math
 import cv2
 import numpy as np
 import pytest
+from test_track_attached import silent_frames
 
 from semlab.tracking import Tracker, ic
 from semlab.tracking.band import (
@@ -67,17 +68,6 @@ def test_a_textured_substrate_no_longer_holds_the_probe_back(monkeypatch):
 
     seq = make_family_sequence("substrates", 221)
 
-    def silent():
-        t = Tracker()
-        r0 = t.init(seq.frames[0], seq.roi)
-        truth = seq.truth
-        count = 0
-        for k in range(1, len(seq.frames)):
-            r = t.update(seq.frames[k])
-            err = math.hypot(r.x - r0.x - (truth.x[k] - truth.x[0]), r.y - r0.y - (truth.y[k] - truth.y[0]))
-            count += bool(r.ok and truth.visible[k] and err > 1.0)
-        return count
-
-    assert silent() <= 5
+    assert silent_frames(seq) <= 5
     monkeypatch.setattr(ic, "FLAT_BACKGROUND_TEXTURE", math.inf)
-    assert silent() >= 20
+    assert silent_frames(seq) >= 20
