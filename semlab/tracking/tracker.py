@@ -34,9 +34,6 @@ MIN_ROI_PX = 16
 #: smoothed ROI it was found in (a 3σ separation of the object's and the background's levels: below,
 #: Otsu's threshold splits noise).
 MIN_CONTRAST_NOISE = 3.0
-#: The template options the cut of attached pieces needs to find the brightest Otsu class as frame 0's
-#: contour was found (:func:`~semlab.tracking.attached.substrate_pieces`).
-SEGMENTATION_KEYS = ("bright_object", "morph_kernel", "morph_iterations")
 #: A frame must exceed the ROI by this many px (each dimension) to be searched.
 FRAME_OVER_ROI_PX = 4
 #: What a method may raise on a frame it cannot handle: the frame is lost, never the run.
@@ -232,17 +229,8 @@ class Tracker:
         self.texture = background_texture(patch, contour.region, noise)
         self.edge_sigma = edge_blur(patch, contour, contrast)
         widths = self.band_widths()
-        attached = None
-        if METHOD_CLASSES[self.method].cuts_attached and self.options.band.cut_attached:
-            segmentation = self.options.template.as_kwargs()
-            # Particles only where the region's bumps are the scene's, not the noise's.
-            contour, attached = without_attached(contour, raw, choose=segmentation["choose"],
-                                                 outline_resolved=self.contrast_noise * MAX_OUTLINE_NOISE >= 1.0,
-                                                 **{k: segmentation[k] for k in SEGMENTATION_KEYS})
-        band = clear_band(registration_band(contour, widths), attached, contour.region)
-        if band.sum() < MIN_BAND_PIXELS:
-            raise ValueError(f"the contour template in ROI {roi} leaves {int(band.sum())} band pixels away from "
-                             f"the ROI border, fewer than {MIN_BAND_PIXELS}: enlarge the ROI or move it onto the tip")
+        contour, attached = self._cut_attached(contour, raw)
+        band = _checked_band(clear_band(registration_band(contour, widths), attached, contour.region), roi)
         if not (self.options.photometry.whiten or self.options.photometry.noise_weights):
             noise = NoiseModel()
         algorithm = METHOD_CLASSES[self.method](self.options)
@@ -252,6 +240,18 @@ class Tracker:
         self.centre0 = np.array(roi_centre(roi))
         # Frame 0 is the origin of every displacement: its position is the ROI's centre by definition.
         return TrackResult(float(self.centre0[0]), float(self.centre0[1]), 1.0, True, sigma_x=0.0, sigma_y=0.0)
+
+    def _cut_attached(self, contour: ContourTemplate, raw) -> tuple[ContourTemplate, np.ndarray | None]:
+        """Frame 0's ``contour`` without the substrate Otsu's level joined to it and, where its outline is
+        resolved above the noise, the particles touching it (:func:`~semlab.tracking.attached.without_attached`),
+        and the pixels cut (None: none, or a method that does not cut)."""
+        if not (METHOD_CLASSES[self.method].cuts_attached and self.options.band.cut_attached):
+            return contour, None
+        template = self.options.template
+        return without_attached(contour, raw, choose=template.choose,
+                                outline_resolved=self.contrast_noise * MAX_OUTLINE_NOISE >= 1.0,
+                                bright_object=template.bright_object, morph_kernel=template.morph_kernel,
+                                morph_iterations=template.morph_iterations)
 
     def band_widths(self) -> tuple[int, int]:
         """How far (px) the registration band reaches from the contour: ``(background, object)``
@@ -478,6 +478,14 @@ def smoothed_noise_sd(noise: NoiseModel, level: float, sigma_px: float) -> float
     along_line = float(kernel @ (noise.rho ** lags) @ kernel)
     across = float(kernel @ kernel)
     return sd * float(np.sqrt(along_line * across))
+
+
+def _checked_band(band, roi) -> np.ndarray:
+    """``band``, or a clear error when it holds fewer than :data:`~semlab.tracking.band.MIN_BAND_PIXELS`."""
+    if band.sum() < MIN_BAND_PIXELS:
+        raise ValueError(f"the contour template in ROI {roi} leaves {int(band.sum())} band pixels away from "
+                         f"the ROI border, fewer than {MIN_BAND_PIXELS}: enlarge the ROI or move it onto the tip")
+    return band
 
 
 def _check_contrast(patch, contour: ContourTemplate, noise: NoiseModel, roi,
