@@ -97,6 +97,8 @@ CONTRACT = {
     "max_influence": 0.5,
     # issue 14: every answer is flagged when frame 0's object is not resolved above the noise
     "min_resolved_contrast": 6.0,
+    # issue 14: every answer is flagged while the track's frames match its template at a median score under 0.6
+    "min_track_score": 0.6,
     # issue 14: an answer far from the prediction at a match poorer than the track's typical one is flagged
     "max_poor_jump": 3.0,
     # issue 14: the band's tiles the template does not explain are dropped (semlab.tracking.trimming)

@@ -176,6 +176,10 @@ class ICMethod(Method):
         """A fraction of the first frames' median score (None before frame 1 is registered)."""
         return TYPICAL_SCORE_FRACTION * self._median_score() if self.scores else None
 
+    def track_score(self) -> float | None:
+        """The first frames' median score (None before frame 1 is registered)."""
+        return self._median_score() if self.scores else None
+
     def good(self, fit) -> bool:
         typical = self.typical_score()
         # Before frame 1 has a score, no fit from the prediction is good enough to skip the search.

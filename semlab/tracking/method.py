@@ -174,6 +174,10 @@ class Method:
         """The score a match of the object reaches on this track, or None when the method keeps none."""
         return None
 
+    def track_score(self) -> float | None:
+        """The median match score of the track's first frames, or None when the method keeps none."""
+        return None
+
     def search(self, arr, window, predicted, found):
         """Search ``window`` (the whole image after a loss); returns what is found (or ``found``)."""
         raise NotImplementedError

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from ..template import CONTOUR_CHOICES
 from .consistency import MAX_INFLUENCE_PX
 from .trimming import MISFIT_P_VALUE
-from .uncertainty import AMBIGUOUS_JUMP_PX, MIN_RESOLVED_CONTRAST, SIGMA_LIMIT_PX
+from .uncertainty import AMBIGUOUS_JUMP_PX, MIN_RESOLVED_CONTRAST, MIN_TRACK_SCORE, SIGMA_LIMIT_PX
 
 __all__ = [
     "CANNY_SIGMA",
@@ -252,7 +252,8 @@ class LossOptions:
     inconsistent (``"ic"``: one quadrant of the band moving the answer by more than ``max_influence``
     px, significantly; None: never), or unresolved (``"ic"``: frame 0's object standing less than
     ``min_resolved_contrast`` noise standard deviations above its background, every frame; None: never),
-    or ambiguous (``"ic"``: more than ``max_poor_jump`` px, and more than the move the track expected,
+    or unexplained (``"ic"``: the track's median match score so far under ``min_track_score``; None:
+    never), or ambiguous (``"ic"``: more than ``max_poor_jump`` px, and more than the move the track expected,
     from both its prediction and its last position, at a match scoring under the track's typical one;
     None: never)."""
 
@@ -261,6 +262,7 @@ class LossOptions:
     max_sigma: float | None = SIGMA_LIMIT_PX
     max_influence: float | None = MAX_INFLUENCE_PX
     min_resolved_contrast: float | None = MIN_RESOLVED_CONTRAST
+    min_track_score: float | None = MIN_TRACK_SCORE
     max_poor_jump: float | None = AMBIGUOUS_JUMP_PX
 
     def __post_init__(self):
@@ -272,6 +274,8 @@ class LossOptions:
             _refuse("max_influence", self.max_influence, "be > 0 px or None")
         if self.min_resolved_contrast is not None and not self.min_resolved_contrast > 0:
             _refuse("min_resolved_contrast", self.min_resolved_contrast, "be > 0 or None")
+        if self.min_track_score is not None and not 0 < self.min_track_score < 1:
+            _refuse("min_track_score", self.min_track_score, "lie in (0, 1) or None")
         if self.max_poor_jump is not None and not self.max_poor_jump >= 0:
             _refuse("max_poor_jump", self.max_poor_jump, "be >= 0 px or None")
         _normalise(self, min_relative_score=float(self.min_relative_score),
@@ -279,6 +283,7 @@ class LossOptions:
                    max_influence=None if self.max_influence is None else float(self.max_influence),
                    min_resolved_contrast=None if self.min_resolved_contrast is None
                    else float(self.min_resolved_contrast),
+                   min_track_score=None if self.min_track_score is None else float(self.min_track_score),
                    max_poor_jump=None if self.max_poor_jump is None else float(self.max_poor_jump))
 
 

@@ -21,7 +21,7 @@ from .options import DEFAULT_METHOD, KEYWORD_GROUP, TrackerOptions
 from .paper import ContourMethod, HBMethod, SSDMethod
 from .result import TrackResult
 from .search import search_window
-from .uncertainty import ambiguous_jump, too_uncertain, unresolved
+from .uncertainty import ambiguous_jump, too_uncertain, unexplained, unresolved
 
 __all__ = ["METHOD_CLASSES", "Tracker"]
 
@@ -155,6 +155,13 @@ class Tracker:
         :data:`~semlab.tracking.uncertainty.MIN_RESOLVED_CONTRAST`): there the noise shapes the outline
         as much as the object, and a thin shaft's registration slides along it unseen by its
         precision. None never flags.
+    min_track_score : float or None
+        ``"ic"``: every answer is reported ``ok=False`` ("unexplained"; the tracker follows it all the
+        same) while the track's first frames (up to ten) match its template at a median score under
+        this (:data:`~semlab.tracking.uncertainty.MIN_TRACK_SCORE`): the template then accounts for
+        too little of what the frames show for the fits' precision to vouch for an answer (a real
+        needle over a real background at a low dose, biased by a pixel while its precision says a few
+        tenths). None never flags.
 
     An unknown keyword raises TypeError with the list of the allowed ones; the options, checked
     and grouped by concern, are :attr:`options` (:class:`~semlab.tracking.options.TrackerOptions`).
@@ -408,8 +415,9 @@ class Tracker:
 
     def _distrust(self, uncertainty) -> str | None:
         """Why a followed answer is not to be trusted, or None: the frame's precision too poor, one part
-        of its band moving it alone, or frame 0's object not resolved above the noise (:attr:`options`'
-        ``loss``; methods that judge their answers only)."""
+        of its band moving it alone, frame 0's object not resolved above the noise, or the track's
+        frames not explained by its template (:attr:`options`' ``loss``; methods that judge their
+        answers only)."""
         if uncertainty is None or not self.algorithm.flags_uncertain:
             return None
         loss = self.options.loss
@@ -424,6 +432,10 @@ class Tracker:
         if loss.min_resolved_contrast is not None and unresolved(self.contrast_noise, loss.min_resolved_contrast):
             return (f"unresolved: frame 0's object stands {self.contrast_noise:.1f} noise standard deviations above "
                     f"its background < min_resolved_contrast {loss.min_resolved_contrast:g}")
+        track_score = self.algorithm.track_score()
+        if loss.min_track_score is not None and unexplained(track_score, loss.min_track_score):
+            return (f"unexplained: the track's frames match its template at a median score of {track_score:.2f} "
+                    f"< min_track_score {loss.min_track_score:g}")
         return None
 
     def _doubt_jump(self, jump: float, expected: float, score: float) -> str | None:
