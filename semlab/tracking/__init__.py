@@ -53,6 +53,10 @@ Modules
     Template averaging over the first frames and the consistency of the band's pixels.
 ``method``
     The interface the Tracker drives, the motion state and a frame's verdict.
+``uncertainty``, ``consistency``
+    Each frame's ``sigma_x``, ``sigma_y`` and the tests behind the flags; whether the band's quadrants agree.
+``trust``
+    :class:`~semlab.tracking.trust.Judge`: whether a followed answer may be reported, or why not.
 ``ic``, ``paper``
     One object per algorithm: ``"ic"``; ``"contour"``, ``"ssd"``, ``"hb"``.
 ``tracker``

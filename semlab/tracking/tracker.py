@@ -13,7 +13,6 @@ from ..subpixel import NoiseModel, estimate_noise
 from ..template import ContourTemplate, identify_contour_template
 from .attached import MAX_OUTLINE_NOISE, clear_band, without_attached
 from .band import MIN_BAND_PIXELS, background_texture, band_widths, edge_blur, registration_band
-from .consistency import inconsistent
 from .frames import GrayScale, as_frame
 from .ic import ICMethod
 from .method import Method, Motion, Setup, Verdict
@@ -21,7 +20,7 @@ from .options import DEFAULT_METHOD, KEYWORD_GROUP, TrackerOptions
 from .paper import ContourMethod, HBMethod, SSDMethod
 from .result import TrackResult
 from .search import search_window
-from .uncertainty import ambiguous_jump, too_uncertain, unexplained, unresolved
+from .trust import Judge
 
 __all__ = ["METHOD_CLASSES", "Tracker"]
 
@@ -243,6 +242,8 @@ class Tracker:
         algorithm = METHOD_CLASSES[self.method](self.options)
         algorithm.start(Setup(image, roi, patch, contour, band, widths, noise, to_8bit, self.texture))
         self.algorithm, self.noise, self.roi, self.attached = algorithm, noise, roi, attached
+        #: Whether each followed answer may be reported (:mod:`semlab.tracking.trust`).
+        self.judge = Judge(self.options.loss, self.contrast_noise, algorithm)
         self.motion = Motion()
         self.centre0 = np.array(roi_centre(roi))
         # Frame 0 is the origin of every displacement: its position is the ROI's centre by definition.
@@ -402,7 +403,7 @@ class Tracker:
         moved = self.algorithm.after_accept(arr, verdict)
         if moved is not None:  # the template's origin moved: the state follows (the position stays)
             motion.shift = motion.shift + moved
-        reason = self._distrust(uncertainty) or self._doubt_jump(jump, expected, verdict.score)
+        reason = self.judge.distrust(uncertainty) or self.judge.doubt_jump(jump, expected, verdict.score)
         if reason is not None:
             # Followed (the motion moves on, the next frame starts from here; a frame that
             # registered well still improves the template) but not trusted: a flag is better than
@@ -412,44 +413,6 @@ class Tracker:
             return result
         sx, sy = uncertainty.sigma
         return dataclasses.replace(result, sigma_x=float(sx), sigma_y=float(sy))
-
-    def _distrust(self, uncertainty) -> str | None:
-        """Why a followed answer is not to be trusted, or None: the frame's precision too poor, one part
-        of its band moving it alone, frame 0's object not resolved above the noise, or the track's
-        frames not explained by its template (:attr:`options`' ``loss``; methods that judge their
-        answers only)."""
-        if uncertainty is None or not self.algorithm.flags_uncertain:
-            return None
-        loss = self.options.loss
-        if loss.max_sigma is not None and too_uncertain(uncertainty.precision, loss.max_sigma):
-            p = uncertainty.precision
-            return (f"too uncertain: the frame and its recent ones allow ({p[0]:.2f}, {p[1]:.2f}) px "
-                    f"> max_sigma {loss.max_sigma:g} px")
-        if loss.max_influence is not None and inconsistent(uncertainty.influence, loss.max_influence):
-            pull = uncertainty.influence
-            return (f"inconsistent: one quadrant of the band moves the answer {pull.shift_px:.2f} px "
-                    f"> max_influence {loss.max_influence:g} px (chi2 {pull.chi2:.0f})")
-        if loss.min_resolved_contrast is not None and unresolved(self.contrast_noise, loss.min_resolved_contrast):
-            return (f"unresolved: frame 0's object stands {self.contrast_noise:.1f} noise standard deviations above "
-                    f"its background < min_resolved_contrast {loss.min_resolved_contrast:g}")
-        track_score = self.algorithm.track_score()
-        if loss.min_track_score is not None and unexplained(track_score, loss.min_track_score):
-            return (f"unexplained: the track's frames match its template at a median score of {track_score:.2f} "
-                    f"< min_track_score {loss.min_track_score:g}")
-        return None
-
-    def _doubt_jump(self, jump: float, expected: float, score: float) -> str | None:
-        """Why an answer ``jump`` px off the track, at a match of ``score``, is ambiguous, or None:
-        farther than :attr:`options`' ``max_poor_jump`` and than the ``expected`` move
-        (:meth:`~semlab.tracking.method.Motion.record_miss`), at a match under the track's typical one
-        (:func:`~semlab.tracking.uncertainty.ambiguous_jump`; methods that judge their answers only)."""
-        if self.options.loss.max_poor_jump is None or not self.algorithm.flags_uncertain:
-            return None
-        limit, typical = max(self.options.loss.max_poor_jump, expected), self.algorithm.typical_score()
-        if not ambiguous_jump(jump, score, typical, limit):
-            return None
-        return (f"ambiguous: {jump:.1f} px off the track > {limit:.1f} px (max_poor_jump or the "
-                f"expected move), at a match scoring {score:.2f} < the track's typical {typical:.2f}")
 
     def _lose(self, reason: str) -> TrackResult:
         motion = self.motion

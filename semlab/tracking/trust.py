@@ -1,0 +1,74 @@
+"""Whether a followed answer can be trusted: the flags that report it ``ok=False``, with the reason.
+
+A method that judges its answers (``"ic"``: :attr:`~semlab.tracking.method.Method.flags_uncertain`)
+follows every frame it can; :class:`Judge` then says, from the frame's
+:class:`~semlab.tracking.uncertainty.Uncertainty` and the track's state, whether the answer may be
+reported. The checks and their limits are the :class:`~semlab.tracking.options.LossOptions`; each
+test is a function of :mod:`semlab.tracking.uncertainty` or :mod:`semlab.tracking.consistency`,
+where its constant is measured. A flag judges, it does not steer: the tracker follows a flagged
+answer all the same.
+"""
+
+from __future__ import annotations
+
+from .consistency import inconsistent
+from .method import Method
+from .options import LossOptions
+from .uncertainty import Uncertainty, ambiguous_jump, too_uncertain, unexplained, unresolved
+
+__all__ = ["Judge"]
+
+
+class Judge:
+    """The flags on one track.
+
+    Parameters
+    ----------
+    loss : LossOptions
+        Which checks run (None: that check never flags) and their limits.
+    contrast_noise : float
+        Frame 0's object contrast over the smoothed noise (:attr:`~semlab.tracking.Tracker.contrast_noise`).
+    method : Method
+        The track's method: whether it judges its answers, and its match scores.
+    """
+
+    def __init__(self, loss: LossOptions, contrast_noise: float, method: Method):
+        self.loss, self.contrast_noise, self.method = loss, contrast_noise, method
+
+    def distrust(self, uncertainty: Uncertainty | None) -> str | None:
+        """Why a followed answer is not to be trusted, or None: the frame's precision too poor ("too
+        uncertain"), one part of its band moving it alone ("inconsistent"), frame 0's object not
+        resolved above the noise ("unresolved"), or the track's frames not explained by its template
+        ("unexplained")."""
+        if uncertainty is None or not self.method.flags_uncertain:
+            return None
+        loss = self.loss
+        if loss.max_sigma is not None and too_uncertain(uncertainty.precision, loss.max_sigma):
+            p = uncertainty.precision
+            return (f"too uncertain: the frame and its recent ones allow ({p[0]:.2f}, {p[1]:.2f}) px "
+                    f"> max_sigma {loss.max_sigma:g} px")
+        if loss.max_influence is not None and inconsistent(uncertainty.influence, loss.max_influence):
+            pull = uncertainty.influence
+            return (f"inconsistent: one quadrant of the band moves the answer {pull.shift_px:.2f} px "
+                    f"> max_influence {loss.max_influence:g} px (chi2 {pull.chi2:.0f})")
+        if loss.min_resolved_contrast is not None and unresolved(self.contrast_noise, loss.min_resolved_contrast):
+            return (f"unresolved: frame 0's object stands {self.contrast_noise:.1f} noise standard deviations above "
+                    f"its background < min_resolved_contrast {loss.min_resolved_contrast:g}")
+        track_score = self.method.track_score()
+        if loss.min_track_score is not None and unexplained(track_score, loss.min_track_score):
+            return (f"unexplained: the track's frames match its template at a median score of {track_score:.2f} "
+                    f"< min_track_score {loss.min_track_score:g}")
+        return None
+
+    def doubt_jump(self, jump: float, expected: float, score: float) -> str | None:
+        """Why an answer ``jump`` px off the track, at a match of ``score``, is ambiguous, or None:
+        farther than ``max_poor_jump`` and than the ``expected`` move
+        (:meth:`~semlab.tracking.method.Motion.record_miss`), at a match under the track's typical one
+        (:func:`~semlab.tracking.uncertainty.ambiguous_jump`)."""
+        if self.loss.max_poor_jump is None or not self.method.flags_uncertain:
+            return None
+        limit, typical = max(self.loss.max_poor_jump, expected), self.method.typical_score()
+        if not ambiguous_jump(jump, score, typical, limit):
+            return None
+        return (f"ambiguous: {jump:.1f} px off the track > {limit:.1f} px (max_poor_jump or the "
+                f"expected move), at a match scoring {score:.2f} < the track's typical {typical:.2f}")
