@@ -258,6 +258,44 @@ def _bar(width, length=70, angle_deg=20.0, shape=(120, 120)):
     return (u >= -5) & (u <= length) & (np.abs(v) <= width / 2)
 
 
+def _on_the_bar(u, v, angle_deg=20.0, size=120):
+    """The ROI point ``u`` px along :func:`_bar`'s axis from the right border and ``v`` px across it."""
+    a = math.radians(angle_deg)
+    return size - 1 - (u * math.cos(a) - v * math.sin(a)), 60 + u * math.sin(a) + v * math.cos(a)
+
+
+@pytest.mark.parametrize("side", [1, -1])
+def test_a_particle_on_the_flank_near_the_apex_does_not_widen_the_wedge(side):
+    # A 10-px needle (the shapes family's spare seed 273) with a disc of radius 6 on one flank, 16 px behind
+    # its end: inside the span the flanks are fitted on, and larger than the opening's disc, so the body keeps
+    # it. Fitted by least squares alone, the flank bent out over it and nothing was cut; with the
+    # repeated-medians line the flank stays the needle's and the disc's part near the apex is cut, none
+    # of the needle.
+    yy, xx = np.mgrid[:120, :120]
+    needle = _bar(10)
+    centre = _on_the_bar(70 - 16, side * (5 + 6 - 1.5))
+    disc = np.hypot(xx - centre[0], yy - centre[1]) <= 6
+    cut = apex_bumps(needle | disc)
+    assert cut.sum() >= 20 and not (cut & needle).any()
+
+
+@pytest.mark.parametrize("family, seed", [("gray_charging", 248), ("shapes", 273)])
+def test_particles_near_the_apex_of_corpus_needles_are_cut(family, seed):
+    # Spare seeds (not test seeds) whose needles carry particles on their flanks in frame 0. Charging 248:
+    # one at the apex, and another on the other flank 17-27 px behind, which pulls that flank's
+    # repeated-medians line further out than its least-squares line, over the first; fitted so, nothing
+    # was cut and the track drifted 1-2.7 px on 36 frames reported ok. Shapes 273: one on the flank
+    # 16 px behind, which bends the least-squares line out over itself; fitted so, nothing was cut and
+    # 34 frames drifted 1-4 px reported ok. The inner of the two lines is cut from in both.
+    from semlab.evaluation import make_family_sequence
+
+    seq = make_family_sequence(family, seed)
+    x, y, w, h = seq.roi
+    patch = np.asarray(seq.frames[0])[y:y + h, x:x + w]
+    region = identify_contour_template(patch, **Tracker().options.template.as_kwargs()).region
+    assert apex_bumps(region).sum() >= 10
+
+
 def test_a_wide_end_face_keeps_its_bump():
     # A bump at the corner of a 40-px-wide end: no thin tip, whose apex alone fixes the position along
     # the shaft, so no cut (the wedge model's half-width guard: without it, the bump is cut).

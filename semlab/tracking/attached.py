@@ -26,8 +26,10 @@ A particle at the apex of a thin tip escapes the openings: the disc shaves the t
 one piece that touches the apex, and the tip of a wedge is as bright as a particle (the rim). There
 the probe's own shape tells them apart (:func:`apex_bumps`): the flanks of a tip 14-44 px behind
 its apex (:data:`WEDGE_FIT_PX`) are extrapolated to the apex as a wedge (its axis and half-width,
-each linear in the distance from the apex), and what the region holds outside that wedge near the
-apex (:data:`BUMP_REACH_PX`), of a particle's size and round, is a particle. Only where the wedge
+each linear in the distance from the apex; each flank the inner of its least-squares and
+repeated-medians lines, :func:`_inner_flank`, so that a particle on a flank does not widen the
+wedge over itself), and what the region holds outside that wedge near the apex
+(:data:`BUMP_REACH_PX`), of a particle's size and round, is a particle. Only where the wedge
 describes the probe: the region fills the wedge between its flanks (:data:`MIN_WEDGE_FILL`; a
 gripper's gap does not) and the tip is thin (:data:`MAX_WEDGE_HALF_WIDTH_PX`; a wide end face fixes
 both axes by itself). Left in the template, such a particle holds the answer back along the shaft,
@@ -54,6 +56,7 @@ from typing import NamedTuple
 
 import cv2
 import numpy as np
+from scipy.stats import siegelslopes
 
 from ..template import ContourTemplate, brightest_of_three, edge_strength, identify_contour_template
 
@@ -255,6 +258,20 @@ def substrate_pieces(contour: ContourTemplate, *, bright_object: bool = True, mo
     return cv2.dilate(thick, _disc(SUBSTRATE_MIN_THICKNESS_PX)).astype(bool) & beyond.astype(bool)
 
 
+def _inner_flank(s: np.ndarray, edge: np.ndarray, outward: float) -> np.ndarray:
+    """One flank of the wedge as a line ``(slope, intercept)`` in the distance from the apex.
+
+    A particle sitting on the flank only ever pushes its bins' ``edge`` outward. The least-squares
+    line follows it a little; the repeated-medians line (Siegel 1982) ignores it while it covers under
+    half of the bins, and is pulled further than least squares when it covers more. Of the two, the
+    one lying further inside near the apex (at :data:`BUMP_REACH_PX`) is the flank.
+    """
+    least_squares = np.polyfit(s, edge, 1)
+    repeated_medians = np.array(siegelslopes(edge, s))
+    inside = [outward * np.polyval(line, BUMP_REACH_PX) for line in (least_squares, repeated_medians)]
+    return (least_squares, repeated_medians)[int(np.argmin(inside))]
+
+
 def _wedge(region: np.ndarray, apex: tuple[int, int]) -> np.ndarray | None:
     """The wedge the tip's flanks draw to its ``apex`` (bool mask), or None where no thin, filled
     wedge describes the region (see the module docstring)."""
@@ -270,18 +287,21 @@ def _wedge(region: np.ndarray, apex: tuple[int, int]) -> np.ndarray | None:
     normal = np.array([-axis[1], axis[0]])
     along, across = offsets[fitted] @ axis, offsets[fitted] @ normal
     bins = np.floor(along / WEDGE_BIN_PX).astype(np.int64)
-    rows = []  # per bin: mean distance from the apex, half-width, centre across the axis
+    rows = []  # per bin: mean distance from the apex, the two flanks across the axis
     for b in np.unique(bins):
         in_bin = bins == b
         if in_bin.sum() >= 3:
-            lo, hi = across[in_bin].min(), across[in_bin].max()
-            rows.append((along[in_bin].mean(), 0.5 * (hi - lo + 1.0), 0.5 * (hi + lo)))
+            rows.append((along[in_bin].mean(), across[in_bin].min(), across[in_bin].max()))
     if len(rows) < MIN_WEDGE_BINS:
         return None
-    s, half, middle = np.array(rows).T
-    half_width, centre_line = np.polyfit(s, half, 1), np.polyfit(s, middle, 1)
-    if np.polyval(half_width, BUMP_REACH_PX) > MAX_WEDGE_HALF_WIDTH_PX:
+    s, lo, hi = np.array(rows).T
+    # Whether the tip is thin is asked of the bins' mean width, by least squares: where the region is no
+    # wedge (a wide end's corner), its bins' flanks are no lines for a median to choose among.
+    if np.polyval(np.polyfit(s, 0.5 * (hi - lo + 1.0), 1), BUMP_REACH_PX) > MAX_WEDGE_HALF_WIDTH_PX:
         return None
+    lo_line, hi_line = _inner_flank(s, lo, outward=-1.0), _inner_flank(s, hi, outward=+1.0)
+    half_width = 0.5 * (hi_line - lo_line) + np.array([0.0, 0.5])
+    centre_line = 0.5 * (hi_line + lo_line)
     yy, xx = np.mgrid[:region.shape[0], :region.shape[1]]
     s_all = (xx - apex[0]) * axis[0] + (yy - apex[1]) * axis[1]
     off_axis = np.abs((xx - apex[0]) * normal[0] + (yy - apex[1]) * normal[1] - np.polyval(centre_line, s_all))
