@@ -59,4 +59,6 @@ def test_a_far_jump_at_a_poor_match_is_ambiguous_unless_expected_or_well_matched
     assert judge.doubt_jump(10.0, 12.0, 0.7) is None  # the track expected a move that large
     assert judge.doubt_jump(10.0, 0.0, 0.85) is None  # the match vouches for it
     assert judge.doubt_jump(2.0, 0.0, 0.1) is None  # within a change of speed's reach
-    assert Judge(LossOptions(), 20.0, _Method(typical=None)).doubt_jump(10.0, 0.0, 0.1) is None
+    before = Judge(LossOptions(), 20.0, _Method(typical=None))  # frame 1 found by the coarse search
+    assert "no typical score" in before.doubt_jump(1.5, 0.0, 0.95)
+    assert before.doubt_jump(0.9, 0.0, 0.1) is None  # within a steady pixel of frame 0

@@ -24,6 +24,7 @@ from semlab.tracking.uncertainty import (
     RECENT_FRAMES,
     SIGMA_LIMIT_PX,
     TYPICAL_MATCH_SCORE,
+    UNVOUCHED_JUMP_PX,
     YOUNG_TEMPLATE_FRAMES,
     YOUNG_TEMPLATE_INFLATION,
     RecentPrecision,
@@ -215,9 +216,28 @@ def test_a_jump_is_ambiguous_only_far_from_the_prediction_at_a_poor_match():
     assert ambiguous_jump(far, 0.7, 0.8)
     assert not ambiguous_jump(near, 0.7, 0.8)  # within a change of speed's reach
     assert not ambiguous_jump(far, 0.8, 0.8)  # the match vouches for it
-    assert not ambiguous_jump(far, 0.1, None)  # no typical score yet: nothing to judge by
+    # No typical score yet (frame 1 from the coarse search): beyond a steady pixel, nothing vouches for it.
+    assert ambiguous_jump(UNVOUCHED_JUMP_PX + 0.1, 0.99, None)
+    assert not ambiguous_jump(UNVOUCHED_JUMP_PX, 0.1, None)
+    assert ambiguous_jump(0.6, 0.99, None, limit_px=0.5)  # a stricter max_poor_jump stays stricter
     assert ambiguous_jump(far, float("nan"), 0.8)
     assert ambiguous_jump(2.0, 0.7, 0.8, limit_px=1.0)
+
+
+def test_a_far_jump_before_the_track_has_a_typical_score_is_flagged():
+    # thin_low_dose 103 (dev): frame 1's fit from frame 0 fails and the coarse search finds the shaft
+    # ~7 px along its axis from the tip, at a score (0.93) no registered frame can vouch for yet. It used
+    # to pass as ok: the jump check had no typical score to judge it by.
+    seq = make_family_sequence("thin_low_dose", 103)
+    t = Tracker()
+    t.init(seq.frames[0], seq.roi)
+    r = t.update(seq.frames[1])
+    assert r.reason.startswith("ambiguous: the coarse search's answer") and "no typical score" in r.reason
+    assert not r.ok
+    # Without the check it was the silent error the flag now reports (more than 2 px off).
+    loose = track(seq.frames[:2], seq.roi, max_poor_jump=None)
+    errors = frame_errors(loose, seq.truth[seq.truth["frame"] <= 1], seq.roi)
+    assert loose["ok"].iloc[1] and np.hypot(errors["ex"].iloc[1], errors["ey"].iloc[1]) > 2.0
 
 
 def _results(frames, roi, **options):

@@ -255,7 +255,7 @@ class LossOptions:
     or unexplained (``"ic"``: the track's median match score so far under ``min_track_score``; None:
     never), or ambiguous (``"ic"``: more than ``max_poor_jump`` px, and more than the move the track expected,
     from both its prediction and its last position, at a match scoring under the track's typical one;
-    None: never)."""
+    before the track has one, more than ``UNVOUCHED_JUMP_PX`` = 1 px at any match; None: never)."""
 
     min_score: float | None = None
     min_relative_score: float = MIN_RELATIVE_SCORE

@@ -14,7 +14,14 @@ from __future__ import annotations
 from .consistency import inconsistent
 from .method import Method
 from .options import LossOptions
-from .uncertainty import Uncertainty, ambiguous_jump, too_uncertain, unexplained, unresolved
+from .uncertainty import (
+    UNVOUCHED_JUMP_PX,
+    Uncertainty,
+    ambiguous_jump,
+    too_uncertain,
+    unexplained,
+    unresolved,
+)
 
 __all__ = ["Judge"]
 
@@ -63,12 +70,17 @@ class Judge:
     def doubt_jump(self, jump: float, expected: float, score: float) -> str | None:
         """Why an answer ``jump`` px off the track, at a match of ``score``, is ambiguous, or None:
         farther than ``max_poor_jump`` and than the ``expected`` move
-        (:meth:`~semlab.tracking.method.Motion.record_miss`), at a match under the track's typical one
+        (:meth:`~semlab.tracking.method.Motion.record_miss`), at a match under the track's typical one; or,
+        before the track has one, farther than
+        :data:`~semlab.tracking.uncertainty.UNVOUCHED_JUMP_PX` at any match
         (:func:`~semlab.tracking.uncertainty.ambiguous_jump`)."""
         if self.loss.max_poor_jump is None or not self.method.flags_uncertain:
             return None
         limit, typical = max(self.loss.max_poor_jump, expected), self.method.typical_score()
         if not ambiguous_jump(jump, score, typical, limit):
             return None
+        if typical is None:
+            return (f"ambiguous: the coarse search's answer, {jump:.1f} px off the track > "
+                    f"{min(limit, UNVOUCHED_JUMP_PX):.1f} px, with no typical score yet to vouch for it")
         return (f"ambiguous: {jump:.1f} px off the track > {limit:.1f} px (max_poor_jump or the "
                 f"expected move), at a match scoring {score:.2f} < the track's typical {typical:.2f}")

@@ -136,6 +136,15 @@ MIN_TRACK_SCORE = 0.6
 #: the shaft tens of px along its axis, as well matched as the hidden tip's frames around it and far
 #: below the track's typical match.
 AMBIGUOUS_JUMP_PX = 3.0
+#: Before the track has a typical score (frame 1 registered from frame 0 did not converge to a good
+#: enough match, and the coarse search's answer stood instead), an answer farther than this (px) from the
+#: prediction is ambiguous whatever its score: from frame 0's position a still or slowly moving object is
+#: within a pixel (:data:`~semlab.tracking.ic.STEADY_PX`) and the registration converges from there, so
+#: a search answer that differs by more is another minimum, and no registered frame's score can vouch for
+#: it. On the corpus's development and spare seeds such frame-1 answers were more than 1 px off the truth
+#: in 12 of 13 ok frames (1.1-7.3 px, at low dose and on the semi-real needle; the thirteenth, 0.75 px
+#: from frame 0, was right).
+UNVOUCHED_JUMP_PX = 1.0
 
 
 #: The clustered covariance (:func:`clustered_covariance`) groups the band's pixels in tiles of this
@@ -350,9 +359,12 @@ def ambiguous_jump(jump_px: float, score: float, typical_score: float | None,
                    limit_px: float = AMBIGUOUS_JUMP_PX) -> bool:
     """Whether an answer ``jump_px`` off the track (from both its prediction and its last position) is
     another minimum of the cost that its match does not vouch for: farther than ``limit_px``, with a
-    ``score`` under the track's
-    ``typical_score`` (None: no typical score yet, nothing to judge by)."""
-    return typical_score is not None and jump_px > limit_px and not score >= typical_score
+    ``score`` under the track's ``typical_score``; or, with no typical score yet (None: frame 1 found
+    by the coarse search), farther than ``UNVOUCHED_JUMP_PX`` (or ``limit_px`` if smaller) whatever
+    its score."""
+    if typical_score is None:
+        return jump_px > min(limit_px, UNVOUCHED_JUMP_PX)
+    return jump_px > limit_px and not score >= typical_score
 
 
 def too_uncertain(sigma: tuple[float, float], limit: float = SIGMA_LIMIT_PX) -> bool:
