@@ -15,9 +15,9 @@ from .consistency import inconsistent
 from .method import Method
 from .options import LossOptions
 from .uncertainty import (
-    UNVOUCHED_JUMP_PX,
     Uncertainty,
     ambiguous_jump,
+    ambiguous_jump_limit,
     too_uncertain,
     unexplained,
     unresolved,
@@ -72,7 +72,7 @@ class Judge:
         farther than ``max_poor_jump`` and than the ``expected`` move
         (:meth:`~semlab.tracking.method.Motion.record_miss`), at a match under the track's typical one; or,
         before the track has one, farther than
-        :data:`~semlab.tracking.uncertainty.UNVOUCHED_JUMP_PX` at any match
+        :func:`~semlab.tracking.uncertainty.ambiguous_jump_limit` at any match
         (:func:`~semlab.tracking.uncertainty.ambiguous_jump`)."""
         if self.loss.max_poor_jump is None or not self.method.flags_uncertain:
             return None
@@ -81,6 +81,6 @@ class Judge:
             return None
         if typical is None:
             return (f"ambiguous: the coarse search's answer, {jump:.1f} px off the track > "
-                    f"{min(limit, UNVOUCHED_JUMP_PX):.1f} px, with no typical score yet to vouch for it")
+                    f"{ambiguous_jump_limit(typical, limit):.1f} px, with no typical score yet to vouch for it")
         return (f"ambiguous: {jump:.1f} px off the track > {limit:.1f} px (max_poor_jump or the "
                 f"expected move), at a match scoring {score:.2f} < the track's typical {typical:.2f}")

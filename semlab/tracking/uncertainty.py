@@ -47,11 +47,13 @@ __all__ = [
     "RECENT_FRAMES",
     "SIGMA_LIMIT_PX",
     "TYPICAL_MATCH_SCORE",
+    "UNVOUCHED_JUMP_PX",
     "YOUNG_TEMPLATE_FRAMES",
     "YOUNG_TEMPLATE_INFLATION",
     "RecentPrecision",
     "Uncertainty",
     "ambiguous_jump",
+    "ambiguous_jump_limit",
     "band_tiles",
     "clustered_covariance",
     "least_squares_covariance",
@@ -136,8 +138,8 @@ MIN_TRACK_SCORE = 0.6
 #: the shaft tens of px along its axis, as well matched as the hidden tip's frames around it and far
 #: below the track's typical match.
 AMBIGUOUS_JUMP_PX = 3.0
-#: Before the track has a typical score (frame 1 registered from frame 0 did not converge to a good
-#: enough match, and the coarse search's answer stood instead), an answer farther than this (px) from the
+#: Before the track has a typical score (frame 1 is always searched, and the coarse search's answer
+#: stood instead of the registration's, which records no score), an answer farther than this (px) from the
 #: prediction is ambiguous whatever its score: from frame 0's position a still or slowly moving object is
 #: within a pixel (:data:`~semlab.tracking.ic.STEADY_PX`) and the registration converges from there, so
 #: a search answer that differs by more is another minimum, and no registered frame's score can vouch for
@@ -362,9 +364,15 @@ def ambiguous_jump(jump_px: float, score: float, typical_score: float | None,
     ``score`` under the track's ``typical_score``; or, with no typical score yet (None: frame 1 found
     by the coarse search), farther than ``UNVOUCHED_JUMP_PX`` (or ``limit_px`` if smaller) whatever
     its score."""
-    if typical_score is None:
-        return jump_px > min(limit_px, UNVOUCHED_JUMP_PX)
-    return jump_px > limit_px and not score >= typical_score
+    if jump_px <= ambiguous_jump_limit(typical_score, limit_px):
+        return False
+    return typical_score is None or not score >= typical_score
+
+
+def ambiguous_jump_limit(typical_score: float | None, limit_px: float = AMBIGUOUS_JUMP_PX) -> float:
+    """How far (px) an answer may jump before :func:`ambiguous_jump` judges it: ``limit_px`` once the
+    track has a typical score, at most :data:`UNVOUCHED_JUMP_PX` before."""
+    return limit_px if typical_score is not None else min(limit_px, UNVOUCHED_JUMP_PX)
 
 
 def too_uncertain(sigma: tuple[float, float], limit: float = SIGMA_LIMIT_PX) -> bool:
