@@ -277,6 +277,25 @@ def test_lost_target_is_flagged_and_reacquired_after_a_jump():
     assert results[5].y - CENTRE[1] == pytest.approx(25.5, abs=0.05)
 
 
+@pytest.mark.parametrize("direction", [-1, 1])
+def test_a_move_that_stops_at_the_border_is_found_where_it_stopped(direction):
+    # A 50-px step that stops 60 px from the start, near the image's border: the next frame's
+    # constant-velocity prediction puts the band off the image (the 200-px A→B moves of the corpus
+    # do this at every stop near a border). Nothing can be followed from there; the search finds
+    # the probe where it stopped. It used to report the frame lost, "the target has left the image".
+    step = [(0.0, 10.0 * direction), (0.0, 60.0 * direction), (0.0, 60.0 * direction)]
+    frames = frames_for([(0, 0), (0, 0), *step], noise=2.0)
+    t = Tracker()
+    t.init(frames[0], ROI)
+    results = [t.update(f) for f in frames[1:]]
+    assert all(r.ok for r in results), [r.reason for r in results]
+    # 8 times the white-noise bound along x (0.012 px: white_noise_crb(2.0)), the answer of any
+    # fit that converged on the probe.
+    for r, (dx, dy) in zip(results[1:], step):
+        assert r.x - CENTRE[0] == pytest.approx(dx, abs=0.1)
+        assert r.y - CENTRE[1] == pytest.approx(dy, abs=0.1)
+
+
 @pytest.mark.parametrize("jump", [40.0, 55.0, 70.0])
 @pytest.mark.parametrize("gain, offset", [(1.0, 0.0), (0.5, -20.0), (0.3, 40.0)])
 def test_a_jump_along_the_shaft_is_not_mistaken_for_the_shaft(jump, gain, offset):

@@ -159,17 +159,22 @@ class ICMethod(Method):
         """The constant-velocity prediction."""
         return motion.shift + motion.velocity
 
-    def follow(self, arr, predicted, motion: Motion) -> FitResult:
+    def follow(self, arr, predicted, motion: Motion) -> FitResult | None:
         """Registration from the prediction: while tracking it is within a fraction of a pixel
-        (then the smoothed first stage is skipped) or a few px (a change of speed)."""
+        (then the smoothed first stage is skipped) or a few px (a change of speed). None when the
+        band there is off the image: a move that stopped at the border (the 200-px A→B moves) has
+        its speed extrapolated past it, and the search from the prediction's window finds it."""
         steady = motion.prediction_error < STEADY_PX
         start = Start(predicted, self.gain, self.offset)
         # A steady fit that has to move more than a few px is a change of speed: the smoothed
         # stage is the tool then, not 20 crawling full-resolution iterations.
-        fit = self._register(arr, start, robust_start=not steady, max_move=STEADY_MAX_MOVE_PX if steady else None,
-                             give_up=True)
-        if steady and not fit.converged:
-            fit = self._register(arr, start, give_up=True)
+        try:
+            fit = self._register(arr, start, robust_start=not steady,
+                                 max_move=STEADY_MAX_MOVE_PX if steady else None, give_up=True)
+            if steady and not fit.converged:
+                fit = self._register(arr, start, give_up=True)
+        except ValueError:  # the band at the prediction has left the image (register's crop)
+            return None
         return fit
 
     def typical_score(self) -> float | None:
