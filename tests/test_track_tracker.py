@@ -21,7 +21,7 @@ from semlab.tracking import (
     track,
 )
 from semlab.tracking.ic import ICMethod
-from semlab.tracking.search import search_window
+from semlab.tracking.search import border_overhang, search_window
 
 SHAPE = (200, 260)
 TIP = (150.0, 100.0)
@@ -277,13 +277,16 @@ def test_lost_target_is_flagged_and_reacquired_after_a_jump():
     assert results[5].y - CENTRE[1] == pytest.approx(25.5, abs=0.05)
 
 
+@pytest.mark.parametrize("stop", [60.0, 70.0])
 @pytest.mark.parametrize("direction", [-1, 1])
-def test_a_move_that_stops_at_the_border_is_found_where_it_stopped(direction):
-    # A 50-px step that stops 60 px from the start, near the image's border: the next frame's
-    # constant-velocity prediction puts the band off the image (the 200-px A→B moves of the corpus
-    # do this at every stop near a border). Nothing can be followed from there; the search finds
-    # the probe where it stopped. It used to report the frame lost, "the target has left the image".
-    step = [(0.0, 10.0 * direction), (0.0, 60.0 * direction), (0.0, 60.0 * direction)]
+def test_a_move_that_stops_at_the_border_is_found_where_it_stopped(direction, stop):
+    # A 50-60 px step that stops near the image's border: the next frame's constant-velocity
+    # prediction puts the band off the image (the 200-px A→B moves of the corpus do this at every
+    # stop near a border). Nothing can be followed from there; the search finds the probe where it
+    # stopped. It used to report the frame lost, "the target has left the image". At 70 px the ROI
+    # reaches 10 px past the border, and the coarse search could not place the template there: the
+    # probe stayed lost, whole-frame searches included.
+    step = [(0.0, 10.0 * direction), (0.0, stop * direction), (0.0, stop * direction)]
     frames = frames_for([(0, 0), (0, 0), *step], noise=2.0)
     t = Tracker()
     t.init(frames[0], ROI)
@@ -294,6 +297,19 @@ def test_a_move_that_stops_at_the_border_is_found_where_it_stopped(direction):
     for r, (dx, dy) in zip(results[1:], step):
         assert r.x - CENTRE[0] == pytest.approx(dx, abs=0.1)
         assert r.y - CENTRE[1] == pytest.approx(dy, abs=0.1)
+
+
+def test_the_coarse_template_hangs_over_the_border_by_what_lies_outside_its_mask():
+    mask = np.zeros((20, 30), bool)
+    mask[5:12, 8:25] = True  # rows 5-11, columns 8-24
+    image = (80, 100)
+    assert border_overhang((0, 0, 100, 80), image, mask) == (5, 8, 8, 5)
+    assert border_overhang((0, 30, 60, 50), image, mask) == (0, 8, 8, 0)  # the left and bottom borders
+    assert border_overhang((10, 10, 50, 50), image, mask) == (0, 0, 0, 0)  # inside: no overhang
+    assert border_overhang((0, 0, 100, 80), image, None) == (0, 0, 0, 0)
+    tiny = np.zeros((20, 30), bool)
+    tiny[10, 10] = True  # too few pixels for coarse_template to flatten the template outside them
+    assert border_overhang((0, 0, 100, 80), image, tiny) == (0, 0, 0, 0)
 
 
 @pytest.mark.parametrize("jump", [40.0, 55.0, 70.0])

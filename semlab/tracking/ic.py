@@ -195,7 +195,7 @@ class ICMethod(Method):
         """A jump, a poor match or a lost target: the coarse search over the window, and the better
         match of the two, the one nearer the prediction when about as good."""
         found = self._register(arr, Start(coarse_search(arr, window, self.coarse, self.options.search.coarse_factor,
-                                                        self.roi), self.gain, self.offset))
+                                                        self.roi, self._coarse_mask), self.gain, self.offset))
         if fit is None or self.clearly_better(found, fit) or (found.converged and (not fit.converged or (
                 found.score >= fit.score - SCORE_TIE
                 and np.hypot(*(found.shift - predicted)) < np.hypot(*(fit.shift - predicted))))):

@@ -20,7 +20,7 @@ from .band import inner_mask
 from .frames import crop
 from .uncertainty import least_squares_covariance
 
-__all__ = ["Candidate", "coarse_mask", "coarse_search", "coarse_template", "reacquire", "search_window"]
+__all__ = ["Candidate", "border_overhang", "coarse_mask", "coarse_search", "coarse_template", "reacquire", "search_window"]
 
 #: The coarse search sees the object's region and band dilated by this many coarse pixels.
 COARSE_MASK_REACH = 4
@@ -98,9 +98,15 @@ def coarse_template(template, mask, factor: int) -> np.ndarray:
     return small
 
 
-def coarse_search(arr, window, small, factor: int, roi) -> np.ndarray:
+def coarse_search(arr, window, small, factor: int, roi, mask=None) -> np.ndarray:
     """Coarse template position (its shift against ``roi``) by normalised correlation of the
     :func:`coarse_template` ``small`` at ``1/factor`` scale over ``window``.
+
+    With the template's ``mask`` (:func:`coarse_mask`), the template may hang over the image's
+    border by what lies outside the mask's bounding box: a probe near the border, whose ROI reaches
+    past the frame while the object and its neighbourhood are inside, is still found. Where the
+    window meets the border, the image is extended by its edge's pixels that far
+    (:func:`border_overhang`); the flat template adds nothing to the correlation there.
 
     Raises
     ------
@@ -113,6 +119,9 @@ def coarse_search(arr, window, small, factor: int, roi) -> np.ndarray:
     if float(image.max() - image.min()) <= 0:
         raise ValueError("the search window is constant")
     reduced = image if f == 1 else cv2.resize(image, (ww // f, wh // f), interpolation=cv2.INTER_AREA)
+    top, bottom, left, right = border_overhang(window, arr.shape, mask)
+    if top or bottom or left or right:
+        reduced = cv2.copyMakeBorder(reduced, top, bottom, left, right, cv2.BORDER_REPLICATE)
     if reduced.shape[0] < small.shape[0] or reduced.shape[1] < small.shape[1]:
         raise ValueError("the search window is smaller than the template")
     scores = cv2.matchTemplate(reduced, small, cv2.TM_CCOEFF_NORMED)
@@ -120,7 +129,20 @@ def coarse_search(arr, window, small, factor: int, roi) -> np.ndarray:
     _, _, _, (ix, iy) = cv2.minMaxLoc(scores)
     px, py = parabola_peak(scores, ix, iy)
     # Block-averaging by f maps both images alike: an offset k in the small image is f·k.
-    return np.array([wx + f * px - roi[0], wy + f * py - roi[1]])
+    return np.array([wx + f * (px - left) - roi[0], wy + f * (py - top) - roi[1]])
+
+
+def border_overhang(window, shape, mask) -> tuple[int, int, int, int]:
+    """``(top, bottom, left, right)``: how far (coarse px) the coarse template may hang over each
+    side of ``window`` that is the image's border (an image of ``shape``), keeping its ``mask``
+    inside the image: the rows and columns outside the mask's bounding box. None, or a mask too
+    small for :func:`coarse_template` to have flattened the template outside it: no overhang."""
+    if mask is None or np.count_nonzero(mask) < MIN_COARSE_MASK_PIXELS:
+        return 0, 0, 0, 0
+    rows, cols = np.flatnonzero(np.any(mask, axis=1)), np.flatnonzero(np.any(mask, axis=0))
+    wx, wy, ww, wh = window
+    return (int(rows[0]) if wy <= 0 else 0, int(mask.shape[0] - 1 - rows[-1]) if wy + wh >= shape[0] else 0,
+            int(cols[0]) if wx <= 0 else 0, int(mask.shape[1] - 1 - cols[-1]) if wx + ww >= shape[1] else 0)
 
 
 def _masked_ncc(image, template, mask):
