@@ -1,6 +1,8 @@
 """Where the default tracker's time goes: per-frame wall time by kind of frame, and a cProfile.
 
-Run ``PYTHONPATH=$PWD python benchmarks/profile_tracker.py [--sequence moves_200px] [--cprofile]``.
+Run ``PYTHONPATH=$PWD python benchmarks/profile_tracker.py [--sequence moves_200px] [--cprofile]``, or
+``--family wander --seed 100`` for a sequence of the evaluation corpus (where the speed target is judged:
+tune on its development seeds).
 Frames are classed as "averaging" (the template is still being averaged, the first
 ``template_frames`` registered frames), "move" (the constant-velocity prediction was off by more
 than 1 px, so the smoothed first stage or the coarse search ran) or "steady".
@@ -16,19 +18,27 @@ import time
 import numpy as np
 import pandas as pd
 
+from semlab.evaluation import DEV_SEEDS, make_family_sequence
 from semlab.metrics import run_tracker
 from semlab.peers import MatchTemplatePeer
 from semlab.sim import make_sequence
 from semlab.tracking import Tracker
 
 
-def profile(kind: str, seed: int = 0, repeats: int = 3, clock=time.perf_counter) -> pd.DataFrame:
+def load(kind: str, seed: int = 0, family: str | None = None):
+    """The simulator's sequence ``kind`` (:func:`semlab.sim.make_sequence`), or the corpus's ``family``
+    at ``seed`` (:func:`semlab.evaluation.make_family_sequence`) when one is given."""
+    return make_sequence(kind, seed=seed) if family is None else make_family_sequence(family, seed)
+
+
+def profile(kind: str, seed: int = 0, repeats: int = 3, clock=time.perf_counter, family: str | None = None) -> pd.DataFrame:
     """Median ms per frame of ``Tracker()`` over ``repeats`` runs, grouped by kind of frame.
 
     ``clock=time.process_time`` counts CPU time instead of wall time (steadier on a shared
-    machine, but blind to OpenCV's worker threads waiting for a core).
+    machine, but blind to OpenCV's worker threads waiting for a core). ``family``: a corpus
+    family instead of the sequence ``kind`` (:func:`load`).
     """
-    seq = make_sequence(kind, seed=seed)
+    seq = load(kind, seed, family)
     times, classes = [], None
     for _ in range(repeats):
         t = Tracker()
@@ -52,15 +62,19 @@ def profile(kind: str, seed: int = 0, repeats: int = 3, clock=time.perf_counter)
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--sequence", default="moves_200px")
+    ap.add_argument("--sequence", default="moves_200px", help="a sequence of semlab.sim.make_sequence (seed 0)")
+    ap.add_argument("--family", help="a family of the evaluation corpus instead of --sequence")
+    ap.add_argument("--seed", type=int, default=None, help="--family's seed (default: the first development seed)")
     ap.add_argument("--cprofile", action="store_true")
     ap.add_argument("--cpu", action="store_true", help="CPU time (process_time) instead of wall time")
     args = ap.parse_args(argv)
     clock = time.process_time if args.cpu else time.perf_counter
-    print(f"# {args.sequence}: {'CPU' if args.cpu else 'wall'} ms per update by kind of frame "
+    seed = (DEV_SEEDS[0] if args.seed is None else args.seed) if args.family else 0
+    name = f"{args.family} seed {seed}" if args.family else args.sequence
+    print(f"# {name}: {'CPU' if args.cpu else 'wall'} ms per update by kind of frame "
           "(median of 3 runs per frame)")
-    print(profile(args.sequence, clock=clock).round(3).to_string())
-    seq = make_sequence(args.sequence, seed=0)
+    print(profile(args.sequence, seed, clock=clock, family=args.family).round(3).to_string())
+    seq = load(args.sequence, seed, args.family)
     duel = {"Tracker()": [], "opencv TM_CCOEFF_NORMED": []}
     for _ in range(3):
         duel["Tracker()"].append(run_tracker(Tracker(), seq.frames, seq.roi)[1])
@@ -68,7 +82,6 @@ def main(argv=None) -> int:
     print("# ms per frame, median of 3 interleaved runs: "
           + ", ".join(f"{k} {np.median(v):.2f}" for k, v in duel.items()))
     if args.cprofile:
-        seq = make_sequence(args.sequence, seed=0)
         t = Tracker()
         t.init(seq.frames[0], seq.roi)
         pr = cProfile.Profile()
