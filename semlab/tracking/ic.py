@@ -26,7 +26,7 @@ from .band import (
 )
 from .consistency import band_quadrants, quadrant_influence
 from .method import Method, Motion, Setup, Verdict
-from .registration import FitResult, Start, register
+from .registration import FitResult, OffImage, Start, register
 from .search import coarse_mask, coarse_search, coarse_template, reacquire
 from .trimming import MIN_MISFIT_CONTRAST, trim_misfit_tiles
 from .uncertainty import (
@@ -173,7 +173,7 @@ class ICMethod(Method):
                                  max_move=STEADY_MAX_MOVE_PX if steady else None, give_up=True)
             if steady and not fit.converged:
                 fit = self._register(arr, start, give_up=True)
-        except ValueError:  # the band at the prediction has left the image (register's crop)
+        except OffImage:
             return None
         return fit
 

@@ -26,7 +26,12 @@ from .band import BandModel
 from .frames import crop as crop_frame
 from .options import TrackerOptions
 
-__all__ = ["CROP_MARGIN_PX", "STAGE1_TOLERANCE", "BandCrop", "FitResult", "Start", "band_crop", "register"]
+__all__ = ["CROP_MARGIN_PX", "STAGE1_TOLERANCE", "BandCrop", "FitResult", "OffImage", "Start", "band_crop", "register"]
+
+
+class OffImage(ValueError):
+    """The band at the fit's start is off the image (:func:`band_crop`): nothing there to register."""
+
 
 #: The crop around the band reaches this many px beyond it at the start.
 CROP_MARGIN_PX = 12
@@ -188,7 +193,7 @@ def band_crop(arr, model: BandModel, shift, roi, margin: int, at=(0, 0)) -> Band
     cx1 = min(x0 + bx1 + sx + margin, arr.shape[1])
     cy1 = min(y0 + by1 + sy + margin, arr.shape[0])
     if cx1 - cx0 < MIN_CROP_PX or cy1 - cy0 < MIN_CROP_PX:
-        raise ValueError("the target is outside the image")
+        raise OffImage("the target is outside the image")
     image = crop_frame(arr, cx0, cy0, cx1, cy1)
     whitened = whiten_lines(image, model.rho)
     pts = model.points + (x0 - cx0, y0 - cy0)
@@ -202,7 +207,7 @@ def band_crop(arr, model: BandModel, shift, roi, margin: int, at=(0, 0)) -> Band
         valid = (px0 >= m) & (py0 >= m) & (px0 <= cols - 1 - m) & (py0 <= rows - 1 - m)
         if not valid.all():
             if valid.mean() < MIN_BAND_FRACTION or valid.sum() < MIN_BAND_POINTS:
-                raise ValueError("the target has left the image")
+                raise OffImage("the target has left the image")
             return BandCrop(image, whitened, pts[valid], model.subset(valid), np.array([sx, sy], float))
     return BandCrop(image, whitened, pts, model, np.array([sx, sy], float))
 
@@ -301,7 +306,7 @@ def register(arr, model: BandModel, start: Start, roi, options: TrackerOptions, 
     Raises
     ------
     ValueError
-        The target is outside the image (:func:`band_crop`), or the template has no usable
+        The target is outside the image (:class:`OffImage`, :func:`band_crop`), or the template has no usable
         levels (:func:`semlab.subpixel.gauss_newton_setup`).
     """
     careful = robust_start and not give_up
