@@ -657,6 +657,28 @@ def test_jacobian_denoising_brings_the_gradients_closer_to_the_noise_free_ones(s
         Tracker(jacobian_denoise=-1.0)
 
 
+@pytest.mark.parametrize("box", [(20, 15, 50, 40), (0, 0, 30, 25), (35, 30, 80, 60), (5, 25, 75, 35)])
+def test_nl_means_around_the_band_is_the_whole_templates_there(box):
+    # The Jacobian's NL-means filters only the band's box and NL-means' reach around it: inside
+    # the box the values are those of the whole template's filtering (up to the last bits of its
+    # running sums), outside they are left as they were.
+    from skimage.restoration import denoise_nl_means
+
+    from semlab.tracking.band import NL_MEANS_DISTANCE, NL_MEANS_PATCH, _denoised_around
+
+    rng = np.random.default_rng(sum(box))
+    yy, xx = np.mgrid[:60, :80]
+    img = (40.0 * (np.hypot(xx - 40, yy - 30) < 18) + rng.normal(0, 5, (60, 80))).astype(np.float32)
+    whole = denoise_nl_means(img.astype(np.float64), h=4.0, sigma=5.0, patch_size=NL_MEANS_PATCH,
+                             patch_distance=NL_MEANS_DISTANCE, fast_mode=True).astype(np.float32)
+    part = _denoised_around(img, box, 4.0, 5.0)
+    x0, y0, x1, y1 = box
+    np.testing.assert_allclose(part[y0:y1, x0:x1], whole[y0:y1, x0:x1], rtol=0, atol=1e-4)
+    outside = np.ones(img.shape, bool)
+    outside[y0:y1, x0:x1] = False
+    np.testing.assert_array_equal(part[outside], img[outside])
+
+
 def test_reidentified_contour_has_lost_frame_0s_noise():
     # reidentify=True: after template_frames frames the contour template is identified again on
     # the averaged template (at frame 0's threshold): frame 0's noise moved pixels of its contour,

@@ -19,7 +19,14 @@ import cv2
 import numpy as np
 from skimage.restoration import denoise_nl_means
 
-from ..subpixel import MAD_TO_SD, NoiseModel, five_point_gradients, gauss_newton_setup, whiten_lines
+from ..subpixel import (
+    FIVE_POINT_KERNEL,
+    MAD_TO_SD,
+    NoiseModel,
+    five_point_gradients,
+    gauss_newton_setup,
+    whiten_lines,
+)
 from ..template import ContourTemplate
 from .options import BandOptions, TrackerOptions
 from .uncertainty import band_tiles
@@ -105,6 +112,10 @@ JACOBIAN_SIGMA_PER_NOISE = 5.0
 #: low-dose error on some seeds, 3×3 was worse everywhere: ``benchmarks/bench_tracking_seeds.py``).
 NL_MEANS_PATCH = 7
 NL_MEANS_DISTANCE = 6
+#: NL-means' value at a pixel reads the template this far (px) around it: the search distance plus
+#: the half patch. The 5-point derivative reads this far (px) along its axis.
+NL_MEANS_REACH_PX = NL_MEANS_PATCH // 2 + NL_MEANS_DISTANCE
+FIVE_POINT_REACH_PX = len(FIVE_POINT_KERNEL) // 2
 #: ``photometry="instrument"``: the gain's instrument is the template smoothed by this many px.
 INSTRUMENT_SIGMA = 1.5
 #: The noise weights take the gray level from the template smoothed by this many px.
@@ -412,12 +423,14 @@ def _jacobian_sigma(values, inside, noise: NoiseModel, n_averaged: int, options:
                          jac.jacobian_sigma_first))
 
 
-def _jacobian(template, whitened, values, noise, rho, n_averaged, sigma_j, options: TrackerOptions):
+def _jacobian(template, whitened, values, noise, rho, n_averaged, sigma_j, options: TrackerOptions, used):
     """The template's gradients (eq. 8's 5-point mask) that serve as the Jacobian, on the crop.
 
     From the lightly smoothed template: a noisy Jacobian inflates the variance along the weakly
     constrained direction (along the shaft, only the apex tells x); the curvature then comes from
-    the image (see :func:`semlab.tracking.registration.register`).
+    the image (see :func:`semlab.tracking.registration.register`). ``used`` ``(x0, y0, x1, y1)``:
+    the crop's box that holds the band, where the gradients are read (elsewhere they are not
+    those of the whole template).
     """
     jac = options.jacobian
     source = whitened
@@ -425,9 +438,9 @@ def _jacobian(template, whitened, values, noise, rho, n_averaged, sigma_j, optio
         # The Jacobian from the template denoised by non-local means: its noise (and the averaged
         # template's leftover) enters every estimate through the gradients.
         noise_sd = float(np.sqrt((1.0 - rho ** 2) * np.mean(noise.variance(values)) / n_averaged))
-        source = denoise_nl_means(whitened.astype(np.float64), h=jac.jacobian_denoise * noise_sd, sigma=noise_sd,
-                                  patch_size=NL_MEANS_PATCH, patch_distance=NL_MEANS_DISTANCE,
-                                  fast_mode=True).astype(np.float32)
+        reach = FIVE_POINT_REACH_PX + (_gaussian_reach(sigma_j) if sigma_j > 0 else 0)
+        source = _denoised_around(whitened, _grown(used, reach, whitened.shape), jac.jacobian_denoise * noise_sd,
+                                  noise_sd)
     gx, gy = five_point_gradients(cv2.GaussianBlur(source, (0, 0), sigma_j) if sigma_j > 0 else source)
     if jac.normal_sigma > 0:
         # Keep only the gradient's component along the edge normal, whose direction comes from the
@@ -439,6 +452,34 @@ def _jacobian(template, whitened, values, noise, rho, n_averaged, sigma_j, optio
         along = gx * nx + gy * ny
         gx, gy = along * nx, along * ny
     return gx, gy
+
+
+def _gaussian_reach(sigma: float) -> int:
+    """How far (px) OpenCV's ``GaussianBlur(img, (0, 0), sigma)`` of a float image reads around a
+    pixel: its kernel spans ``round(8σ + 1) | 1`` taps; one px more for the rounding."""
+    return int(math.ceil(4.0 * sigma)) + 1
+
+
+def _grown(box, by: int, shape) -> tuple[int, int, int, int]:
+    """``box`` ``(x0, y0, x1, y1)`` grown by ``by`` px on each side, within an image of ``shape``."""
+    x0, y0, x1, y1 = box
+    return max(x0 - by, 0), max(y0 - by, 0), min(x1 + by, shape[1]), min(y1 + by, shape[0])
+
+
+def _denoised_around(whitened, box, h: float, sigma: float) -> np.ndarray:
+    """``whitened`` with its ``box`` ``(x0, y0, x1, y1)`` denoised by non-local means as in the whole.
+
+    Only the box and :data:`NL_MEANS_REACH_PX` around it are filtered (NL-means' cost grows with
+    the area): inside the box each value is the whole image's, up to the last bits of the
+    filter's running sums; outside it the pixels are left as they were.
+    """
+    x0, y0, x1, y1 = _grown(box, NL_MEANS_REACH_PX, whitened.shape)
+    bx0, by0, bx1, by1 = box
+    part = denoise_nl_means(whitened[y0:y1, x0:x1].astype(np.float64), h=h, sigma=sigma, patch_size=NL_MEANS_PATCH,
+                            patch_distance=NL_MEANS_DISTANCE, fast_mode=True).astype(np.float32)
+    out = whitened.copy()
+    out[by0:by1, bx0:bx1] = part[by0 - y0:by1 - y0, bx0 - x0:bx1 - x0]
+    return out
 
 
 def _smoothed_levels(whitened, finest, at, coarse_sigma: float) -> list[tuple[float, np.ndarray, tuple]]:
@@ -512,7 +553,8 @@ def build_band_model(template, contour: ContourTemplate, band, noise: NoiseModel
     at = (ys - sy0, xs - sx0)
     inside = contour.region[ys, xs]
     sigma_j = _jacobian_sigma(values, inside, noise, n_averaged, options)
-    gx, gy = _jacobian(near, whitened, values, noise, rho, n_averaged, sigma_j, options)
+    gx, gy = _jacobian(near, whitened, values, noise, rho, n_averaged, sigma_j, options,
+                       used=(bx0 - sx0, by0 - sy0, bx1 - sx0, by1 - sy0))
     fine = Level(0.0, whitened[at].astype(np.float64), gx[at].astype(np.float64), gy[at].astype(np.float64))
     # The same, smoothed: the first, robust stage of every frame's registration.
     smooth = cv2.GaussianBlur(whitened, (0, 0), coarse_sigma) if coarse_sigma > 0 else whitened
