@@ -239,15 +239,14 @@ def test_the_ends_of_gripper_jaws_are_not_taken_for_bright_particles(seed, monke
 @pytest.mark.slow
 def test_a_bright_particle_on_the_flank_no_longer_holds_the_probe_back(monkeypatch):
     # Spare seed 294 of the charging family (not a test seed): a particle at 0.96 of the probe's contrast
-    # touches its upper flank in frame 0. Kept, it held the track 2-5 px back on 15 frames reported ok (35
-    # while the frames flagged inconsistent still entered the template average).
+    # touches its upper flank in frame 0. Kept, it held the track 2-5 px back on 35 frames reported ok.
     from semlab.evaluation import make_family_sequence
 
     seq = make_family_sequence("gray_charging", 294)
 
     assert silent_frames(seq) == 0
     monkeypatch.setattr(attached, "MAX_BRIGHT_LEVEL", attached.MAX_RELATIVE_LEVEL)
-    assert silent_frames(seq) >= 10
+    assert silent_frames(seq) >= 20
 
 
 def _bar(width, length=70, angle_deg=20.0, shape=(120, 120)):
@@ -374,12 +373,11 @@ def test_only_otsus_level_is_judged():
 @pytest.mark.slow
 def test_substrate_joined_to_the_probe_no_longer_holds_it_back(monkeypatch):
     # Substrates spare seed 248: Otsu's region in frame 0 is 6.5x the probe's (the grains around it); kept,
-    # they hold the track back by 2 px with ok on 10 frames (34 while the frames flagged inconsistent still
-    # entered the template average). Cut, no frame is silent.
+    # they hold the track back by 2 px with ok on 34 frames. Cut, no frame is silent.
     from semlab.evaluation import make_family_sequence
 
     seq = make_family_sequence("substrates", 248)
 
     assert silent_frames(seq) == 0
     monkeypatch.setattr(attached, "substrate_pieces", lambda contour, **_: np.zeros(contour.region.shape, bool))
-    assert silent_frames(seq) >= 5
+    assert silent_frames(seq) >= 20

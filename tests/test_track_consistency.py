@@ -9,7 +9,7 @@ import pytest
 from scipy.stats import chi2
 from test_track_uncertainty import CENTRE, ROI, wedge_frame
 
-from semlab.tracking import Tracker, ic
+from semlab.tracking import Tracker
 from semlab.tracking.consistency import (
     INFLUENCE_CHI2,
     MAX_INFLUENCE_PX,
@@ -136,29 +136,3 @@ def test_max_influence_must_be_positive_or_none(bad):
     with pytest.raises(ValueError, match="max_influence"):
         Tracker(max_influence=bad)
     assert Tracker(max_influence=None).options.loss.max_influence is None
-
-
-def test_an_inconsistent_frame_does_not_enter_the_template_average(monkeypatch):
-    # Clutter over one part of the band pulls that frame's answer: averaged into the template, it would
-    # stay there after the clutter has gone (corpus clutter, development seed 106). The frame whose
-    # quadrants disagree is followed and flagged, and the average skips it; the clean frames enter it.
-    frames = [wedge_frame(0.4 * k, 0.2 * k, noise=2.0, seed=k) for k in range(8)]
-    real = ic.ICMethod._influence
-    pulled = {3, 4}
-    counter = {"frame": 0}
-
-    def influence(self, fit, parts):
-        return Influence(0.9, 100.0) if counter["frame"] in pulled else real(self, fit, parts)
-
-    monkeypatch.setattr(ic.ICMethod, "_influence", influence)
-    t = Tracker()
-    t.init(frames[0], ROI)
-    for k, frame in enumerate(frames[1:], 1):
-        counter["frame"] = k
-        before = t.algorithm.averager.count
-        result = t.update(frame)
-        entered = t.algorithm.averager.count - before
-        if k in pulled:
-            assert not result.ok and result.reason.startswith("inconsistent") and entered == 0
-        else:
-            assert result.ok and entered == 1

@@ -62,15 +62,3 @@ def test_a_far_jump_at_a_poor_match_is_ambiguous_unless_expected_or_well_matched
     before = Judge(LossOptions(), 20.0, _Method(typical=None))  # frame 1 found by the coarse search
     assert "no typical score" in before.doubt_jump(1.5, 0.0, 0.95)
     assert before.doubt_jump(0.9, 0.0, 0.1) is None  # within a steady pixel of frame 0
-
-
-def test_only_an_inconsistent_frame_is_kept_out_of_the_template():
-    judge = Judge(LossOptions(), 20.0, _Method())
-    assert judge.spoils_template(_uncertainty(influence=Influence(0.8, 50.0)))
-    assert not judge.spoils_template(_uncertainty(influence=Influence(0.8, 5.0)))  # not significant
-    assert not judge.spoils_template(_uncertainty((0.1, 0.5)))  # too uncertain: its data are weak, not wrong
-    assert not judge.spoils_template(None)
-    assert not Judge(LossOptions(max_influence=None), 20.0, _Method()).spoils_template(
-        _uncertainty(influence=Influence(3.0, 1e3)))
-    assert not Judge(LossOptions(), 20.0, _Method(flags=False)).spoils_template(
-        _uncertainty(influence=Influence(3.0, 1e3)))

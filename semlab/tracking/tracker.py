@@ -400,13 +400,13 @@ class Tracker:
                                             self.options.loss.max_poor_jump or 0.0)
         result = self._accept(verdict.shift, verdict.score)
         uncertainty = self.algorithm.sigma(verdict)
-        moved = None if self.judge.spoils_template(uncertainty) else self.algorithm.after_accept(arr, verdict)
+        moved = self.algorithm.after_accept(arr, verdict)
         if moved is not None:  # the template's origin moved: the state follows (the position stays)
             motion.shift = motion.shift + moved
         reason = self.judge.distrust(uncertainty) or self.judge.doubt_jump(jump, expected, verdict.score)
         if reason is not None:
             # Followed (the motion moves on, the next frame starts from here; a frame that
-            # registered well and consistently still improves the template) but not trusted: a flag is better than
+            # registered well still improves the template) but not trusted: a flag is better than
             # a number that may be a pixel off.
             return TrackResult(float("nan"), float("nan"), result.score, False, reason)
         if uncertainty is None:

@@ -67,14 +67,6 @@ class Judge:
                     f"< min_track_score {loss.min_track_score:g}")
         return None
 
-    def spoils_template(self, uncertainty: Uncertainty | None) -> bool:
-        """Whether the frame must stay out of the template average: one part of its band pulls the
-        answer ("inconsistent", clutter or an occluder over the probe), which the average would keep
-        in the template long after the clutter has moved on."""
-        max_influence = self.loss.max_influence
-        return (uncertainty is not None and self.method.flags_uncertain and max_influence is not None
-                and inconsistent(uncertainty.influence, max_influence))
-
     def doubt_jump(self, jump: float, expected: float, score: float) -> str | None:
         """Why an answer ``jump`` px off the track, at a match of ``score``, is ambiguous, or None:
         farther than ``max_poor_jump`` and than the ``expected`` move
