@@ -702,3 +702,21 @@ def test_reidentified_contour_has_lost_frame_0s_noise():
 def test_band_widths_need_the_texture_from_init():
     with pytest.raises(RuntimeError, match="init"):
         Tracker().band_widths()
+
+
+@pytest.mark.parametrize("stop", [0.0, 60.0, 70.0])
+@pytest.mark.parametrize("direction", [-1, 1])
+def test_the_reacquisition_finds_a_probe_whose_roi_reaches_past_the_border(direction, stop):
+    # The re-acquisition's correlation, like the coarse search, may place the template over the image's
+    # border by what lies outside its mask: at 70 px the ROI reaches 10 px past the border while the
+    # wedge and its surroundings are inside. It used to find nothing there (or only the nearest place
+    # the whole template fits, 10 px off).
+    frames = frames_for([(0, 0), (0.0, stop * direction)], noise=2.0)
+    t = Tracker()
+    t.init(frames[0], ROI)
+    whole = (0, 0, SHAPE[1], SHAPE[0])
+    found = t.algorithm.reacquire(frames[1].astype(np.float32), whole, np.zeros(2))
+    assert found is not None and found.ok
+    dx, dy = found.shift - t.algorithm.origin
+    # The correlation of the smoothed images, refined by a parabola: within its pixel-locking error.
+    assert dx == pytest.approx(0.0, abs=0.3) and dy == pytest.approx(stop * direction, abs=0.3)

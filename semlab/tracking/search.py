@@ -160,7 +160,9 @@ def reacquire(arr, window, template, region, roi, rho: float) -> Candidate | Non
     contrast — over the whole window, at half resolution and then at full resolution around the
     peak. The best match over the window, not the one nearest the prediction: near the prediction a
     probe that jumped along its own shaft leaves shaft behind, which correlates well too. The peak
-    must stand out from the best match more than 8 px away, or the answer is ambiguous.
+    must stand out from the best match more than 8 px away, or the answer is ambiguous. As in
+    :func:`coarse_search`, the template may hang over the image's border by what lies outside its
+    mask (:func:`border_overhang`).
 
     Parameters
     ----------
@@ -180,14 +182,21 @@ def reacquire(arr, window, template, region, roi, rho: float) -> Candidate | Non
         None: nothing found well enough.
     """
     x0, y0, w, h = roi
-    wx, wy, ww, wh = window
-    if ww < w + 4 or wh < h + 4:
-        return None
-    image = cv2.GaussianBlur(crop(arr, wx, wy, wx + ww, wy + wh), (0, 0), REACQUIRE_SIGMA)
-    tmpl = cv2.GaussianBlur(template, (0, 0), REACQUIRE_SIGMA)
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (REACQUIRE_DILATION, REACQUIRE_DILATION))
     mask = cv2.dilate(region.astype(np.uint8), kernel) > 0
     mask &= inner_mask(mask.shape, REACQUIRE_BORDER_PX)
+    # Where the window is the image's border, the template may hang over it by what lies outside the
+    # mask (the correlation does not read there): the frame is extended by its edge's pixels.
+    top, bottom, left, right = border_overhang(window, arr.shape, mask)
+    plain = crop(arr, window[0], window[1], window[0] + window[2], window[1] + window[3])
+    if top or bottom or left or right:
+        plain = cv2.copyMakeBorder(plain, top, bottom, left, right, cv2.BORDER_REPLICATE)
+    wx, wy = window[0] - left, window[1] - top  # the frame pixel of plain[0, 0]
+    wh, ww = plain.shape
+    if ww < w + 4 or wh < h + 4:
+        return None
+    image = cv2.GaussianBlur(plain, (0, 0), REACQUIRE_SIGMA)
+    tmpl = cv2.GaussianBlur(template, (0, 0), REACQUIRE_SIGMA)
     if mask.sum() < MIN_REACQUIRE_PIXELS or mask.all() or np.ptp(tmpl[mask]) <= 0:
         return None
     # Half resolution over the window (a quarter of the work), full resolution near its peak.
@@ -220,8 +229,7 @@ def reacquire(arr, window, template, region, roi, rho: float) -> Candidate | Non
     b = tmpl[mask].astype(np.float64)
     gain = float(np.cov(a, b)[0, 1] / np.var(b, ddof=1))
     offset = (1.0 - rho) * float(a.mean() - gain * b.mean())
-    cov = _match_covariance(crop(arr, wx + fx0 + ix, wy + fy0 + iy, wx + fx0 + ix + w, wy + fy0 + iy + h), template, mask,
-                            gain)
+    cov = _match_covariance(plain[fy0 + iy:fy0 + iy + h, fx0 + ix:fx0 + ix + w], template, mask, gain)
     return Candidate(shift, gain, offset, float(peak), cov)
 
 
