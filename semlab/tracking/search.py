@@ -185,13 +185,7 @@ def reacquire(arr, window, template, region, roi, rho: float) -> Candidate | Non
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (REACQUIRE_DILATION, REACQUIRE_DILATION))
     mask = cv2.dilate(region.astype(np.uint8), kernel) > 0
     mask &= inner_mask(mask.shape, REACQUIRE_BORDER_PX)
-    # Where the window is the image's border, the template may hang over it by what lies outside the
-    # mask (the correlation does not read there): the frame is extended by its edge's pixels.
-    top, bottom, left, right = border_overhang(window, arr.shape, mask)
-    plain = crop(arr, window[0], window[1], window[0] + window[2], window[1] + window[3])
-    if top or bottom or left or right:
-        plain = cv2.copyMakeBorder(plain, top, bottom, left, right, cv2.BORDER_REPLICATE)
-    wx, wy = window[0] - left, window[1] - top  # the frame pixel of plain[0, 0]
+    plain, (wx, wy) = _overhanging_window(arr, window, mask)
     wh, ww = plain.shape
     if ww < w + 4 or wh < h + 4:
         return None
@@ -231,6 +225,18 @@ def reacquire(arr, window, template, region, roi, rho: float) -> Candidate | Non
     offset = (1.0 - rho) * float(a.mean() - gain * b.mean())
     cov = _match_covariance(plain[fy0 + iy:fy0 + iy + h, fx0 + ix:fx0 + ix + w], template, mask, gain)
     return Candidate(shift, gain, offset, float(peak), cov)
+
+
+def _overhanging_window(arr, window, mask) -> tuple[np.ndarray, tuple[int, int]]:
+    """The window's pixels (float32) and the frame pixel of its ``[0, 0]``. Where the window is the
+    image's border, it is extended by the edge's pixels as far as the template may hang over it, what
+    lies outside ``mask`` (:func:`border_overhang`), which a masked correlation does not read."""
+    wx, wy, ww, wh = window
+    top, bottom, left, right = border_overhang(window, arr.shape, mask)
+    plain = crop(arr, wx, wy, wx + ww, wy + wh)
+    if top or bottom or left or right:
+        plain = cv2.copyMakeBorder(plain, top, bottom, left, right, cv2.BORDER_REPLICATE)
+    return plain, (wx - left, wy - top)
 
 
 def _match_covariance(patch, template, mask, gain: float) -> np.ndarray:
