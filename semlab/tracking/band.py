@@ -457,7 +457,7 @@ def _jacobian(template, whitened, values, noise, rho, n_averaged, sigma_j, optio
 def _gaussian_reach(sigma: float) -> int:
     """How far (px) OpenCV's ``GaussianBlur(img, (0, 0), sigma)`` of a float image reads around a
     pixel: its kernel spans ``round(8σ + 1) | 1`` taps; one px more for the rounding."""
-    return int(math.ceil(4.0 * sigma)) + 1
+    return math.ceil(4.0 * sigma) + 1
 
 
 def _grown(box, by: int, shape) -> tuple[int, int, int, int]:
@@ -543,10 +543,8 @@ def build_band_model(template, contour: ContourTemplate, band, noise: NoiseModel
     reach = int(np.ceil(FILTER_REACH_SIGMAS * max(LADDER[0] * coarse_sigma, coarse_sigma + INSTRUMENT_SIGMA,
                                                   jac.jacobian_sigma_first, jac.normal_sigma,
                                                   NOISE_LEVEL_SIGMA))) + FILTER_REACH_EXTRA_PX
-    th, tw_ = template.shape
     bx0, by0, bx1, by1 = bbox
-    sx0, sy0 = max(bx0 - reach, 0), max(by0 - reach, 0)
-    sx1, sy1 = min(bx1 + reach, tw_), min(by1 + reach, th)
+    sx0, sy0, sx1, sy1 = _grown(bbox, reach, template.shape)
     near = np.ascontiguousarray(template[sy0:sy1, sx0:sx1])
     # Whitened whole, then cut: the same first column.
     whitened = np.ascontiguousarray(whiten_lines(template, rho)[sy0:sy1, sx0:sx1])

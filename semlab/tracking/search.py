@@ -20,7 +20,8 @@ from .band import inner_mask
 from .frames import crop
 from .uncertainty import least_squares_covariance
 
-__all__ = ["Candidate", "border_overhang", "coarse_mask", "coarse_search", "coarse_template", "reacquire", "search_window"]
+__all__ = ["Candidate", "border_overhang", "coarse_mask", "coarse_search", "coarse_template", "extended_over_border",
+           "reacquire", "search_window"]
 
 #: The coarse search sees the object's region and band dilated by this many coarse pixels.
 COARSE_MASK_REACH = 4
@@ -119,9 +120,7 @@ def coarse_search(arr, window, small, factor: int, roi, mask=None) -> np.ndarray
     if float(image.max() - image.min()) <= 0:
         raise ValueError("the search window is constant")
     reduced = image if f == 1 else cv2.resize(image, (ww // f, wh // f), interpolation=cv2.INTER_AREA)
-    top, bottom, left, right = border_overhang(window, arr.shape, mask)
-    if top or bottom or left or right:
-        reduced = cv2.copyMakeBorder(reduced, top, bottom, left, right, cv2.BORDER_REPLICATE)
+    reduced, (left, top) = extended_over_border(reduced, window, arr.shape, mask)
     if reduced.shape[0] < small.shape[0] or reduced.shape[1] < small.shape[1]:
         raise ValueError("the search window is smaller than the template")
     scores = cv2.matchTemplate(reduced, small, cv2.TM_CCOEFF_NORMED)
@@ -133,7 +132,7 @@ def coarse_search(arr, window, small, factor: int, roi, mask=None) -> np.ndarray
 
 
 def border_overhang(window, shape, mask) -> tuple[int, int, int, int]:
-    """``(top, bottom, left, right)``: how far (coarse px) the coarse template may hang over each
+    """``(top, bottom, left, right)``: how far (px at ``mask``'s scale) a template may hang over each
     side of ``window`` that is the image's border (an image of ``shape``), keeping its ``mask``
     inside the image: the rows and columns outside the mask's bounding box. None, or a mask too
     small for :func:`coarse_template` to have flattened the template outside it: no overhang."""
@@ -143,6 +142,15 @@ def border_overhang(window, shape, mask) -> tuple[int, int, int, int]:
     wx, wy, ww, wh = window
     return (int(rows[0]) if wy <= 0 else 0, int(mask.shape[0] - 1 - rows[-1]) if wy + wh >= shape[0] else 0,
             int(cols[0]) if wx <= 0 else 0, int(mask.shape[1] - 1 - cols[-1]) if wx + ww >= shape[1] else 0)
+
+
+def extended_over_border(image, window, shape, mask) -> tuple[np.ndarray, tuple[int, int]]:
+    """``image`` (the ``window`` of an image of ``shape``, at ``mask``'s scale) extended by its edge's
+    pixels by :func:`border_overhang`, and ``(left, top)``: how far its ``[0, 0]`` moved up and left."""
+    top, bottom, left, right = border_overhang(window, shape, mask)
+    if top or bottom or left or right:
+        image = cv2.copyMakeBorder(image, top, bottom, left, right, cv2.BORDER_REPLICATE)
+    return image, (left, top)
 
 
 def _masked_ncc(image, template, mask):
@@ -185,7 +193,9 @@ def reacquire(arr, window, template, region, roi, rho: float) -> Candidate | Non
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (REACQUIRE_DILATION, REACQUIRE_DILATION))
     mask = cv2.dilate(region.astype(np.uint8), kernel) > 0
     mask &= inner_mask(mask.shape, REACQUIRE_BORDER_PX)
-    plain, (wx, wy) = _overhanging_window(arr, window, mask)
+    plain, (left, top) = extended_over_border(crop(arr, window[0], window[1], window[0] + window[2],
+                                                   window[1] + window[3]), window, arr.shape, mask)
+    wx, wy = window[0] - left, window[1] - top  # the frame pixel of plain[0, 0]
     wh, ww = plain.shape
     if ww < w + 4 or wh < h + 4:
         return None
@@ -225,18 +235,6 @@ def reacquire(arr, window, template, region, roi, rho: float) -> Candidate | Non
     offset = (1.0 - rho) * float(a.mean() - gain * b.mean())
     cov = _match_covariance(plain[fy0 + iy:fy0 + iy + h, fx0 + ix:fx0 + ix + w], template, mask, gain)
     return Candidate(shift, gain, offset, float(peak), cov)
-
-
-def _overhanging_window(arr, window, mask) -> tuple[np.ndarray, tuple[int, int]]:
-    """The window's pixels (float32) and the frame pixel of its ``[0, 0]``. Where the window is the
-    image's border, it is extended by the edge's pixels as far as the template may hang over it, what
-    lies outside ``mask`` (:func:`border_overhang`), which a masked correlation does not read."""
-    wx, wy, ww, wh = window
-    top, bottom, left, right = border_overhang(window, arr.shape, mask)
-    plain = crop(arr, wx, wy, wx + ww, wy + wh)
-    if top or bottom or left or right:
-        plain = cv2.copyMakeBorder(plain, top, bottom, left, right, cv2.BORDER_REPLICATE)
-    return plain, (wx - left, wy - top)
 
 
 def _match_covariance(patch, template, mask, gain: float) -> np.ndarray:
