@@ -101,6 +101,8 @@ CONTRACT = {
     "min_track_score": 0.6,
     # issue 14: an answer far from the prediction at a match poorer than the track's typical one is flagged
     "max_poor_jump": 3.0,
+    # issue 14: over a strongly textured substrate, a match 0.06 under the track's first frames' median is flagged
+    "max_textured_drop": 0.06,
     # issue 14: the band's tiles the template does not explain are dropped (semlab.tracking.trimming)
     "misfit_p_value": 1e-4,
     # issue 14: which contour is the object; None: "central" for "ic", the paper's "largest" for the others

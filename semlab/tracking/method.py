@@ -148,6 +148,9 @@ class Method:
     #: is drawn (``"ic"``, with ``cut_attached``: :mod:`semlab.tracking.attached`; the paper's methods
     #: keep the paper's contour).
     cuts_attached = False
+    #: Whether frame 0's background is strongly textured (``"ic"`` flattens it for its band model and
+    #: judges a falling match there: :meth:`~semlab.tracking.trust.Judge.doubt_match`).
+    flatten = False
 
     def __init__(self, options: TrackerOptions):
         self.options = options

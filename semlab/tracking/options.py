@@ -17,7 +17,13 @@ from dataclasses import dataclass, field
 from ..template import CONTOUR_CHOICES
 from .consistency import MAX_INFLUENCE_PX
 from .trimming import MISFIT_P_VALUE
-from .uncertainty import AMBIGUOUS_JUMP_PX, MIN_RESOLVED_CONTRAST, MIN_TRACK_SCORE, SIGMA_LIMIT_PX
+from .uncertainty import (
+    AMBIGUOUS_JUMP_PX,
+    MAX_TEXTURED_SCORE_DROP,
+    MIN_RESOLVED_CONTRAST,
+    MIN_TRACK_SCORE,
+    SIGMA_LIMIT_PX,
+)
 
 __all__ = [
     "CANNY_SIGMA",
@@ -255,7 +261,9 @@ class LossOptions:
     or unexplained (``"ic"``: the track's median match score so far under ``min_track_score``; None:
     never), or ambiguous (``"ic"``: more than ``max_poor_jump`` px, and more than the move the track expected,
     from both its prediction and its last position, at a match scoring under the track's typical one;
-    before the track has one, more than ``UNVOUCHED_JUMP_PX`` = 1 px at any match; None: never)."""
+    before the track has one, more than ``UNVOUCHED_JUMP_PX`` = 1 px at any match; None: never), or slid
+    (``"ic"``, over a strongly textured substrate only: a match scoring more than ``max_textured_drop`` under
+    the track's first frames' median; None: never)."""
 
     min_score: float | None = None
     min_relative_score: float = MIN_RELATIVE_SCORE
@@ -264,6 +272,7 @@ class LossOptions:
     min_resolved_contrast: float | None = MIN_RESOLVED_CONTRAST
     min_track_score: float | None = MIN_TRACK_SCORE
     max_poor_jump: float | None = AMBIGUOUS_JUMP_PX
+    max_textured_drop: float | None = MAX_TEXTURED_SCORE_DROP
 
     def __post_init__(self):
         if not 0 <= self.min_relative_score < 1:
@@ -278,13 +287,16 @@ class LossOptions:
             _refuse("min_track_score", self.min_track_score, "lie in (0, 1) or None")
         if self.max_poor_jump is not None and not self.max_poor_jump >= 0:
             _refuse("max_poor_jump", self.max_poor_jump, "be >= 0 px or None")
+        if self.max_textured_drop is not None and not 0 <= self.max_textured_drop < 1:
+            _refuse("max_textured_drop", self.max_textured_drop, "lie in [0, 1) or None")
         _normalise(self, min_relative_score=float(self.min_relative_score),
                    max_sigma=None if self.max_sigma is None else float(self.max_sigma),
                    max_influence=None if self.max_influence is None else float(self.max_influence),
                    min_resolved_contrast=None if self.min_resolved_contrast is None
                    else float(self.min_resolved_contrast),
                    min_track_score=None if self.min_track_score is None else float(self.min_track_score),
-                   max_poor_jump=None if self.max_poor_jump is None else float(self.max_poor_jump))
+                   max_poor_jump=None if self.max_poor_jump is None else float(self.max_poor_jump),
+                   max_textured_drop=None if self.max_textured_drop is None else float(self.max_textured_drop))
 
 
 #: The groups in the order the Tracker's signature lists them: ``TrackerOptions`` field -> class.

@@ -18,6 +18,7 @@ from .uncertainty import (
     Uncertainty,
     ambiguous_jump,
     ambiguous_jump_limit,
+    slid_on_texture,
     too_uncertain,
     unexplained,
     unresolved,
@@ -84,3 +85,17 @@ class Judge:
                     f"{ambiguous_jump_limit(typical, limit):.1f} px, with no typical score yet to vouch for it")
         return (f"ambiguous: {jump:.1f} px off the track > {limit:.1f} px (max_poor_jump or the "
                 f"expected move), at a match scoring {score:.2f} < the track's typical {typical:.2f}")
+
+    def doubt_match(self, score: float) -> str | None:
+        """Why an answer matching at ``score`` over a strongly textured substrate (the method's
+        :attr:`~semlab.tracking.method.Method.flatten`) has slid onto the substrate, or None: more than
+        ``max_textured_drop`` under the track's first frames' median
+        (:func:`~semlab.tracking.uncertainty.slid_on_texture`)."""
+        limit = self.loss.max_textured_drop
+        if limit is None or not (self.method.flags_uncertain and self.method.flatten):
+            return None
+        track_score = self.method.track_score()
+        if not slid_on_texture(score, track_score, limit):
+            return None
+        return (f"slid: over a strongly textured substrate the match scores {score:.2f}, more than "
+                f"max_textured_drop {limit:g} under the track's first frames' {track_score:.2f}")

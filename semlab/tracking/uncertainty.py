@@ -38,6 +38,7 @@ __all__ = [
     "CALIBRATION",
     "CLUSTER_TILE_PX",
     "INTEGER_VARIANCE_PX2",
+    "MAX_TEXTURED_SCORE_DROP",
     "MIN_RECENT_FRAMES",
     "MIN_RESOLVED_CONTRAST",
     "MIN_TRACK_SCORE",
@@ -59,6 +60,7 @@ __all__ = [
     "least_squares_covariance",
     "model_error",
     "position_sigma",
+    "slid_on_texture",
     "too_uncertain",
     "unexplained",
     "unresolved",
@@ -127,6 +129,19 @@ MIN_RESOLVED_CONTRAST = 6.0
 #: above 0.77 but the low-dose ones (0.22-0.70, nearly every frame flagged already); the real
 #: needle of ``contact_brightness_seq`` at 0.78-0.84.
 MIN_TRACK_SCORE = 0.6
+#: Over a strongly textured substrate (frame 0's background at least
+#: :data:`~semlab.tracking.band.FLAT_BACKGROUND_TEXTURE` times the noise, which the band model
+#: flattens), an answer whose match scores more than this under the track's first frames' median is
+#: not trusted (:func:`slid_on_texture`). There grains as bright as the probe lie along a thin tip's
+#: flanks, some of them inside Otsu's region, and stay where they are while the probe moves: the
+#: registration can slide along the shaft onto them, pixels off while its precision says a few tenths,
+#: and the match then falls as the probe's edges leave the template's. On the evaluation corpus's
+#: development and spare seeds (100-119, 200-299) the 25 such scenes held 124 ok frames more than 1 px
+#: off in 1155 (three tracks slid by 2-18 px), and a drop of 0.06 takes about half of them for a few
+#: good frames (0.04: more of them for five times as many good ones). Over the other scenes a falling
+#: match is an occluder the robust weights handle or a change of charge the gain follows; judged the
+#: same way there, it takes 12 of 72 such frames for 1070 good ones.
+MAX_TEXTURED_SCORE_DROP = 0.06
 #: An answer farther than this (px) from both the constant-velocity prediction and the last position is
 #: another minimum of the cost than the one the track was in: a followed object sits within a pixel of
 #: its prediction, and a change of speed the registration follows from there moves it at most this far
@@ -378,3 +393,10 @@ def ambiguous_jump_limit(typical_score: float | None, limit_px: float = AMBIGUOU
 def too_uncertain(sigma: tuple[float, float], limit: float = SIGMA_LIMIT_PX) -> bool:
     """Whether either axis's uncertainty exceeds ``limit`` (or is not a number)."""
     return not all(math.isfinite(s) and s <= limit for s in sigma)
+
+
+def slid_on_texture(score: float, track_score: float | None, limit: float = MAX_TEXTURED_SCORE_DROP) -> bool:
+    """Whether a match of ``score`` lies more than ``limit`` under the track's first frames'
+    median ``track_score`` (None: no track score yet, never), judged only over a strongly textured
+    substrate (see :data:`MAX_TEXTURED_SCORE_DROP`)."""
+    return track_score is not None and score < track_score - limit
