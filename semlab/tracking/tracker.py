@@ -161,6 +161,12 @@ class Tracker:
         too little of what the frames show for the fits' precision to vouch for an answer (a real
         needle over a real background at a low dose, biased by a pixel while its precision says a few
         tenths). None never flags.
+    max_textured_drop : float or None
+        ``"ic"``, over a strongly textured substrate only (frame 0's background flattened for the band
+        model): an answer whose match scores more than this under the track's first frames' median is
+        reported ``ok=False`` ("slid"; the tracker follows it all the same): the registration has slid
+        along the shaft onto grains that stay where they are
+        (:data:`~semlab.tracking.uncertainty.MAX_TEXTURED_SCORE_DROP`). None never flags.
 
     An unknown keyword raises TypeError with the list of the allowed ones; the options, checked
     and grouped by concern, are :attr:`options` (:class:`~semlab.tracking.options.TrackerOptions`).

@@ -20,7 +20,9 @@ frames before it (:class:`RecentPrecision`). What a frame's precision cannot see
 band that disagrees with the rest — is judged by :mod:`semlab.tracking.consistency`. Nor is an
 answer that jumped away from the prediction to a match poorer than the track's typical one
 (:func:`ambiguous_jump`): another minimum of the cost, which may be the object or something that looks
-partly like it.
+partly like it. Over a strongly textured substrate, nor is an answer whose match fell well under the
+track's first frames' (:func:`slid_on_texture`): the registration has slid onto grains that stay where
+they are.
 """
 
 from __future__ import annotations
