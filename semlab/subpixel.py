@@ -29,6 +29,7 @@ __all__ = [
     "gradient_subpixel_shift",
     "keys_shift_filter",
     "keys_weights",
+    "noise_variance",
     "sample_bicubic",
     "sample_shifted",
     "sample_shifted_filtered",
@@ -41,6 +42,9 @@ FIVE_POINT_KERNEL = np.array([1.0, -8.0, 0.0, 8.0, -1.0], np.float32) / 12.0
 
 #: Robust standard deviation from the median absolute deviation (Gaussian noise).
 MAD_TO_SD = 1.4826
+#: :func:`noise_variance` reads every 4th pair of rows: a 200-px square still gives ~10⁴ differences
+#: (the variance to ~2 %), at a quarter of the cost.
+NOISE_ROW_STEP = 4
 #: Tukey's biweight constant in robust spreads (95 % efficient for Gaussian noise), and the step
 #: (px) below which ``tukey=True`` switches to it.
 TUKEY_C = 4.685
@@ -303,6 +307,37 @@ def estimate_noise(image, *, flat_quantile: float = 0.6) -> NoiseModel:
     intercept = float(np.mean(ys) - slope * np.mean(xs))
     floor = max(0.25 * float(np.min(ys)), 1e-6)
     return NoiseModel(rho=rho, variance_at_zero=intercept, variance_slope=slope, variance_floor=floor)
+
+
+def noise_variance(image, *, row_step: int = NOISE_ROW_STEP) -> float:
+    """The pixel noise variance of ``image``, one number, robustly: a quick check of the dose.
+
+    As in :func:`estimate_noise`, vertical neighbours' differences ``d = I(x, y) − I(x, y + 1)``
+    cancel the scene wherever it varies slowly, and each row pair's median cancels the per-line
+    offsets; their median absolute value (× 1.4826, squared, halved: ``d`` holds two pixels' noise)
+    is the variance, which edges and particles, a few % of the pixels, do not move. Unlike
+    :func:`estimate_noise` it neither splits the variance by gray level nor separates the line
+    correlation, and reads only every ``row_step``-th row pair.
+
+    Parameters
+    ----------
+    image : (M, N) array_like
+        At least 2 rows.
+    row_step : int
+        Row pairs ``(0, 1), (row_step, row_step + 1), ...`` are read.
+
+    Returns
+    -------
+    float
+        Gray levels², 0 for a noise-free flat image.
+    """
+    img = np.asarray(image, np.float32)
+    if img.ndim != 2 or img.shape[0] < 2:
+        raise ValueError(f"need a 2-D image of at least 2 rows to measure the noise, got {img.shape}")
+    d = img[0:-1:row_step] - img[1::row_step]
+    d -= np.median(d, axis=1, keepdims=True)
+    spread = MAD_TO_SD * float(np.median(np.abs(d)))
+    return 0.5 * spread * spread
 
 
 def whiten_lines(image, rho: float) -> np.ndarray:

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from ..subpixel import keys_shift_filter
+from ..subpixel import keys_shift_filter, noise_variance
 from ..template import ContourTemplate
 from .frames import crop
 
@@ -45,7 +45,8 @@ class StoredFrame:
     """The area of one frame around the ROI, and where the template sits in it.
 
     ``at`` is the frame pixel of the area's [0, 0]; ``shift``, ``gain``, ``offset`` the
-    registration's answer (updated when the frame is registered again).
+    registration's answer (updated when the frame is registered again); ``noise`` the area's pixel
+    noise variance (gray levels², :func:`~semlab.subpixel.noise_variance`).
     """
 
     area: np.ndarray
@@ -53,6 +54,7 @@ class StoredFrame:
     shift: np.ndarray
     gain: float
     offset: float
+    noise: float
 
 
 def store_frame(arr, roi, shift, gain: float, offset: float) -> StoredFrame | None:
@@ -64,7 +66,7 @@ def store_frame(arr, roi, shift, gain: float, offset: float) -> StoredFrame | No
     if ax0 < 0 or ay0 < 0 or ax0 + w + 2 * m > arr.shape[1] or ay0 + h + 2 * m > arr.shape[0]:
         return None
     area = crop(arr, ax0, ay0, ax0 + w + 2 * m, ay0 + h + 2 * m).copy()
-    return StoredFrame(area, (ax0, ay0), np.array(shift, float), gain, offset)
+    return StoredFrame(area, (ax0, ay0), np.array(shift, float), gain, offset, noise_variance(area))
 
 
 def registered_patch(stored: StoredFrame, roi, rho: float) -> np.ndarray:
@@ -155,6 +157,19 @@ class TemplateAverager:
     @property
     def complete(self) -> bool:
         return self.count >= self.frames_wanted
+
+    def as_noisy_as_the_first(self, stored: StoredFrame, max_ratio: float) -> bool:
+        """Whether ``stored``'s noise variance is at most ``max_ratio`` times frame 0's, in the frames' gray
+        levels or in the template's (the variance over the registration's gain squared).
+
+        A dose drop makes a frame noisier both ways. A change of the detector's contrast scales the
+        noise with the signal (noisier in gray levels, not in the template's), and an occluder over
+        the band pulls the registration's gain (noisier in the template's levels, not in gray levels):
+        neither is a change of dose. A frame 0 without noise admits only frames without noise.
+        """
+        first = self.frames[0]
+        in_template_levels = stored.noise / stored.gain ** 2 <= max_ratio * first.noise / first.gain ** 2
+        return stored.noise <= max_ratio * first.noise or in_template_levels
 
     def shifts(self) -> list[np.ndarray]:
         return [stored.shift for stored in self.frames]

@@ -60,6 +60,14 @@ BAND_INSIDE_MARGIN_PX = 2
 #: reaches this fraction of the first frames' median.
 AVERAGE_MIN_INLIERS = 0.8
 AVERAGE_MIN_SCORE_FRACTION = 0.8
+#: ... and when its pixel noise variance is at most this many times frame 0's, in gray levels or in the
+#: template's (:meth:`~semlab.tracking.averaging.TemplateAverager.as_noisy_as_the_first`). The frames of one
+#: setting of the microscope agree to a few % (:func:`~semlab.subpixel.noise_variance`; gain jitter,
+#: charging and passing clutter included). After a dose drop, noisier frames averaged in make the
+#: template noisier than frame 0 alone, and the sigma then falls short of the error (a wedge at 20×
+#: frame 0's noise: errors of 0.7 px sd along its axis reported at 0.38 px,
+#: ``tests/test_track_dose.py``).
+AVERAGE_MAX_NOISE_RATIO = 2.0
 
 
 class ICMethod(Method):
@@ -292,7 +300,8 @@ class ICMethod(Method):
         return quadrant_influence(*parts, variance, self.quadrants)
 
     def after_accept(self, arr, verdict: Verdict) -> np.ndarray | None:
-        """The frame enters the template average when it registered well. The answer is the shift
+        """The frame enters the template average when it registered well and is no noisier than
+        :data:`AVERAGE_MAX_NOISE_RATIO` times frame 0 (the dose has not dropped). The answer is the shift
         against the template that measured it, with that template's origin; a template refreshed
         from this frame brings its own origin, and the motion moves into its coordinates."""
         fit = verdict.found
@@ -300,20 +309,21 @@ class ICMethod(Method):
                 fit.inliers > AVERAGE_MIN_INLIERS
                 and fit.score >= AVERAGE_MIN_SCORE_FRACTION * np.median(self.scores)):
             return None
+        stored = store_frame(arr, self.roi, fit.shift, fit.gain, fit.offset)
+        if stored is None or not self.averager.as_noisy_as_the_first(stored, AVERAGE_MAX_NOISE_RATIO):
+            return None
         origin = self.origin.copy()
-        self._average(arr, fit)
+        self._average(stored)
         return self.origin - origin
 
     # ---- template averaging
-    def _average(self, arr, fit: FitResult) -> None:
-        """Running mean of the registered, photometrically normalised ROI (a less noisy template).
+    def _average(self, stored) -> None:
+        """Running mean of the registered, photometrically normalised ROI (a less noisy template),
+        ``stored`` (:func:`~semlab.tracking.averaging.store_frame`) added.
 
         Frame 0 is registered against every new template: it defines the origin, which so carries
         frame 0's noise once instead of the one-frame template's noise in every position.
         """
-        stored = store_frame(arr, self.roi, fit.shift, fit.gain, fit.offset)
-        if stored is None:
-            return
         mean = self.averager.add(stored, self.template)
         self.n_averaged = self.averager.count
         if self.averager.complete:

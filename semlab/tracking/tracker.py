@@ -116,7 +116,8 @@ class Tracker:
         Huber's linear range pixel by pixel — and the frame is fitted again without it, worst tile
         first, at most three (:mod:`semlab.tracking.trimming`). None: off.
     template_frames : int
-        ``"ic"`` averages the template over this many well-registered frames (1: frame 0 only).
+        ``"ic"`` averages the template over this many well-registered frames (1: frame 0 only),
+        each no noisier than twice frame 0's noise variance (a dose drop leaves the template frame 0's).
     consistency_cut : float or None
         ``"ic"``: when the averaged template is built, band pixels whose mean over the
         registered frames taken near the start differs by more than this many standard errors
