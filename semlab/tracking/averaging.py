@@ -168,7 +168,8 @@ class TemplateAverager:
         neither is a change of dose. A frame 0 without noise admits only frames without noise.
         """
         first = self.frames[0]
-        in_template_levels = stored.noise / stored.gain ** 2 <= max_ratio * first.noise / first.gain ** 2
+        # (Cross-multiplied: a gain of 0 compares, it does not divide.)
+        in_template_levels = stored.noise * first.gain ** 2 <= max_ratio * first.noise * stored.gain ** 2
         return stored.noise <= max_ratio * first.noise or in_template_levels
 
     def shifts(self) -> list[np.ndarray]:
