@@ -250,6 +250,15 @@ class NoiseModel:
         return np.maximum(v, self.variance_floor)
 
 
+def _row_pair_differences(img: np.ndarray, row_step: int = 1) -> np.ndarray:
+    """``I(x, y) − I(x, y + 1)`` for the row pairs ``(0, 1), (row_step, row_step + 1), ...``, each
+    pair's median taken off: the scene cancels where it varies slowly, the per-line offsets cancel
+    everywhere, and two rows' noise is left (in ``img``'s dtype)."""
+    d = img[0:-1:row_step] - img[1::row_step]
+    d -= np.median(d, axis=1, keepdims=True)
+    return d
+
+
 def estimate_noise(image, *, flat_quantile: float = 0.6) -> NoiseModel:
     """Estimate the line correlation and the signal-dependent variance from ONE image.
 
@@ -278,8 +287,7 @@ def estimate_noise(image, *, flat_quantile: float = 0.6) -> NoiseModel:
     grad = np.hypot(gx, gy)
     flat = grad <= np.quantile(grad, flat_quantile)
     flat = flat[:-1] & flat[1:]
-    d = img[:-1].astype(np.float64) - img[1:]
-    d -= np.median(d, axis=1, keepdims=True)
+    d = _row_pair_differences(img.astype(np.float64))
     level = 0.5 * (smooth[:-1] + smooth[1:]).astype(np.float64)
     pairs = flat[:, 1:] & flat[:, :-1]
     a, b = d[:, 1:][pairs], d[:, :-1][pairs]
@@ -335,8 +343,7 @@ def noise_variance(image, *, row_step: int = NOISE_ROW_STEP) -> float:
     img = np.asarray(image, np.float32)
     if img.ndim != 2 or img.shape[0] < 2:
         raise ValueError(f"need a 2-D image of at least 2 rows to measure the noise, got {img.shape}")
-    d = img[0:-1:row_step] - img[1::row_step]
-    d -= np.median(d, axis=1, keepdims=True)
+    d = _row_pair_differences(img, row_step)
     spread = MAD_TO_SD * float(np.median(np.abs(d)))
     return 0.5 * spread * spread
 
