@@ -62,3 +62,14 @@ def test_a_far_jump_at_a_poor_match_is_ambiguous_unless_expected_or_well_matched
     before = Judge(LossOptions(), 20.0, _Method(typical=None))  # frame 1 found by the coarse search
     assert "no typical score" in before.doubt_jump(1.5, 0.0, 0.95)
     assert before.doubt_jump(0.9, 0.0, 0.1) is None  # within a steady pixel of frame 0
+
+
+def test_a_re_acquisition_the_registration_drifts_from_is_ambiguous_beyond_the_limit_whatever_its_score():
+    # Its score is the correlation's, which runs above the registration's typical one: a slide along
+    # a shaft scores 0.88 where the track's frames score 0.77 (clutter development seed 106).
+    judge = Judge(LossOptions(), 20.0, _Method(typical=0.8))
+    assert judge.doubt_jump(10.0, 0.0, 0.95) is None
+    assert "drifts away" in judge.doubt_jump(10.0, 0.0, 0.95, drifted=True)
+    assert judge.doubt_jump(10.0, 12.0, 0.95, drifted=True) is None  # the track expected a move that large
+    assert judge.doubt_jump(2.0, 0.0, 0.95, drifted=True) is None  # within a change of speed's reach
+    assert Judge(LossOptions(max_poor_jump=None), 20.0, _Method()).doubt_jump(50.0, 0.0, 0.9, drifted=True) is None

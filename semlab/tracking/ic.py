@@ -226,12 +226,17 @@ class ICMethod(Method):
             fit = self._register(arr, Start(found.shift, found.gain, found.offset))
         except (ValueError, np.linalg.LinAlgError):
             fit = None
-        if (fit is not None and fit.converged and fit.score >= self.threshold()
-                and np.hypot(*(fit.shift - found.shift)) <= REFINED_WITHIN_PX):
+        matches = fit is not None and fit.score >= self.threshold()
+        stays = fit is not None and np.hypot(*(fit.shift - found.shift)) <= REFINED_WITHIN_PX
+        if matches and stays and fit.converged:
             self.gain, self.offset = fit.gain, fit.offset
             return Verdict.accept(fit.shift, fit.score, reacquired=True, found=fit)
         self.gain, self.offset = found.gain, found.offset
-        return Verdict.accept(found.shift, found.score, reacquired=True, found=found)
+        # A registration that matches but drifts away is a cost without a clear minimum (a slide along
+        # a shaft); one that does not match at all is a changed appearance (the real needle's
+        # brightness at contact), where the contrast-invariant correlation is the better witness.
+        return Verdict.accept(found.shift, found.score, reacquired=True, found=found,
+                              drifted=matches and not stays)
 
     def verdict(self, arr, fit, predicted) -> Verdict:
         if not fit.converged:

@@ -70,6 +70,8 @@ class Verdict:
     ``reacquired``: found by the re-acquisition fallback (its prediction error is unknown).
     ``found``: what the method found (e.g. the registration's :class:`FitResult`), for
     :meth:`Method.after_accept`.
+    ``drifted``: re-acquired where the registration matches the template but drifts away: the
+    cost has no clear minimum there, as along a shaft.
     """
 
     ok: bool
@@ -78,10 +80,12 @@ class Verdict:
     reason: str = ""
     reacquired: bool = False
     found: object = None
+    drifted: bool = False
 
     @classmethod
-    def accept(cls, shift, score: float, *, reacquired: bool = False, found=None) -> Verdict:
-        return cls(True, np.asarray(shift, float), score, "", reacquired, found)
+    def accept(cls, shift, score: float, *, reacquired: bool = False, found=None,
+               drifted: bool = False) -> Verdict:
+        return cls(True, np.asarray(shift, float), score, "", reacquired, found, drifted)
 
     @classmethod
     def lose(cls, reason: str) -> Verdict:

@@ -410,7 +410,8 @@ class Tracker:
         moved = self.algorithm.after_accept(arr, verdict)
         if moved is not None:  # the template's origin moved: the state follows (the position stays)
             motion.shift = motion.shift + moved
-        reason = (self.judge.distrust(uncertainty) or self.judge.doubt_jump(jump, expected, verdict.score)
+        reason = (self.judge.distrust(uncertainty)
+                  or self.judge.doubt_jump(jump, expected, verdict.score, drifted=verdict.drifted)
                   or self.judge.doubt_match(verdict.score))
         if reason is not None:
             # Followed (the motion moves on, the next frame starts from here; a frame that

@@ -68,10 +68,12 @@ class Judge:
                     f"< min_track_score {loss.min_track_score:g}")
         return None
 
-    def doubt_jump(self, jump: float, expected: float, score: float) -> str | None:
+    def doubt_jump(self, jump: float, expected: float, score: float, *, drifted: bool = False) -> str | None:
         """Why an answer ``jump`` px off the track, at a match of ``score``, is ambiguous, or None:
         farther than ``max_poor_jump`` and than the ``expected`` move
-        (:meth:`~semlab.tracking.method.Motion.record_miss`), at a match under the track's typical one; or,
+        (:meth:`~semlab.tracking.method.Motion.record_miss`), at a match under the track's typical one,
+        or at any match when the registration ``drifted`` from it (:attr:`~semlab.tracking.method.Verdict.drifted`:
+        its score is a correlation's, not a registration's, and runs higher); or,
         before the track has one, farther than
         :func:`~semlab.tracking.uncertainty.ambiguous_jump_limit` at any match
         (:func:`~semlab.tracking.uncertainty.ambiguous_jump`)."""
@@ -79,6 +81,9 @@ class Judge:
             return None
         limit, typical = max(self.loss.max_poor_jump, expected), self.method.typical_score()
         if not ambiguous_jump(jump, score, typical, limit):
+            if drifted and jump > limit:
+                return (f"ambiguous: re-acquired {jump:.1f} px off the track > {limit:.1f} px (max_poor_jump or "
+                        f"the expected move), where the registration matches but drifts away")
             return None
         if typical is None:
             return (f"ambiguous: the coarse search's answer, {jump:.1f} px off the track > "
