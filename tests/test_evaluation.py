@@ -363,9 +363,38 @@ def test_a_scene_without_its_texture_or_occluder_is_the_same_scene_otherwise():
     assert np.std(flat.frames[corner].mean(axis=0)) < 0.8 * np.std(full.frames[corner].mean(axis=0))
 
 
+def test_the_noise_ablations_take_out_their_part_of_the_noise_and_keep_the_scene():
+    full = make_family_sequence("still", 100)
+    lines, jitter, quiet = (make_family_sequence("still", 100, without=(part,))
+                            for part in ("line_noise", "photometric_jitter", "noise"))
+    for ablated in (lines, jitter, quiet):
+        assert ablated.roi == full.roi and np.allclose(ablated.truth[["x", "y"]], full.truth[["x", "y"]])
+        assert ablated.meta["params"] == full.meta["params"]  # the same draws
+
+    def difference(seq):  # two frames of a still probe: their difference is the noise alone
+        return seq.frames[2].astype(float) - seq.frames[1].astype(float)
+
+    # Without line noise the rows' means of a difference scatter as white noise does: sd / sqrt(width).
+    white = np.std(difference(lines)[:60]) / np.sqrt(full.frames.shape[2])
+    assert np.std(difference(lines).mean(axis=1)) == pytest.approx(white, rel=0.2)
+    assert np.std(difference(full).mean(axis=1)) > 1.5 * white  # the drawn per-line offsets (0.7 gray)
+    # Without photometric jitter a background patch's mean is steady from frame to frame.
+    def patch_means(seq):
+        return np.std([frame[:60, :60].astype(float).mean() for frame in seq.frames])
+    assert patch_means(jitter) < 0.25 * patch_means(full) and patch_means(jitter) < 0.5
+    # Without the noise: the dose 50 times (shot noise 1/sqrt(50) = 0.14 of it), read noise a tenth.
+    ratio = np.std(difference(quiet)[:60, :60]) / np.std(difference(full)[:60, :60])
+    assert 0.09 < ratio < 0.16
+    assert quiet.crb[0] < full.crb[0] / 4 and quiet.crb[1] < full.crb[1] / 4
+    # The substrates family's noise is the simulator's too; the semi-real needle's is not.
+    assert make_family_sequence("substrates", 100, without="line_noise").meta["without"] == ["line_noise"]
+    with pytest.raises(ValueError, match="it can take out: nothing"):
+        make_family_sequence("semi_real", 0, without="noise")
+
+
 def test_ablations_are_checked_before_anything_runs():
     with pytest.raises(ValueError, match="unknown part"):
-        make_family_sequence("clutter", 0, without="noise")
+        make_family_sequence("clutter", 0, without="gravity")
     with pytest.raises(ValueError, match="cannot take out \\['texture'\\]"):
         semlab.evaluate(families="still,substrates", seeds=[0], trackers="ncc", scheduler="inline",
                         progress=False, without="texture")

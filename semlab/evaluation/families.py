@@ -49,7 +49,18 @@ CRB_SAMPLES = 4
 #: What ``make_family_sequence(..., without=...)`` can take out of a scene drawn through the
 #: simulator's :class:`~semlab.sim.Clutter`, every other draw kept (an ablation: which part of a
 #: scene makes a tracker fail).
-ABLATIONS = ("texture", "occluder")
+SCENE_ABLATIONS = ("texture", "occluder")
+#: What it can take out of the noise of a scene drawn through :class:`~semlab.sim.SEMNoise`:
+#: ``"line_noise"`` (the scan line's correlation, per-line offsets and jitter), ``"photometric_jitter"``
+#: (the frames' gain and offset fluctuations and jumps, the probe's charging), ``"noise"`` (both, and
+#: the shot and read noise nearly all: what is left of a tracker's error is its systematic part).
+NOISE_ABLATIONS = ("line_noise", "photometric_jitter", "noise")
+ABLATIONS = SCENE_ABLATIONS + NOISE_ABLATIONS
+#: ``"noise"``: the dose this many times the drawn one (the shot noise's sd 1/√50 ≈ 1/7 of it) and the
+#: read noise this fraction of it. Not 0: the trackers measure the noise, and a noise-free frame
+#: is not a frame a tracker meets.
+ABLATED_DOSE_FACTOR = 50.0
+ABLATED_READ_NOISE_FRACTION = 0.1
 #: The texture's amplitude when it is taken out: not 0, so the substrate still makes the texture's
 #: random draws and every particle, and the noise, stay as drawn (0 skips them).
 ABLATED_TEXTURE = 1e-9
@@ -88,7 +99,8 @@ class Family:
     build : callable ``(Draws) -> Sequence``
     ablations : tuple of str
         The parts of its scenes ``make_family_sequence(..., without=...)`` can take out
-        (:data:`ABLATIONS`; none where the substrate is not the simulator's clutter).
+        (:data:`ABLATIONS`; the scene's parts only where the substrate is the simulator's clutter,
+        none where neither scene nor noise is the simulator's).
     """
 
     name: str
@@ -199,6 +211,21 @@ def _ablated(d: Draws, clutter: Clutter, visible) -> tuple[Clutter, Callable | N
     return clutter, visible
 
 
+def _ablated_noise(d: Draws, noise: SEMNoise, frame_period: float, n_pixels: int) -> SEMNoise:
+    """``noise`` with what ``d.without`` names of it taken out (:data:`NOISE_ABLATIONS`)."""
+    without = set(getattr(d, "without", ()))
+    if "noise" in without:
+        without |= {"line_noise", "photometric_jitter"}
+        noise = noise.replace(dose_e_per_px=ABLATED_DOSE_FACTOR * noise.dose(frame_period, n_pixels),
+                              read_noise_gray=ABLATED_READ_NOISE_FRACTION * noise.read_noise_gray)
+    if "line_noise" in without:
+        noise = noise.replace(line_correlation=0.0, line_offset_gray=0.0, line_jitter_px=0.0)
+    if "photometric_jitter" in without:
+        noise = noise.replace(gain_fluctuation=0.0, offset_fluctuation_gray=0.0, gain_jitter=0.0,
+                              offset_jitter_gray=0.0, charging_amplitude=0.0)
+    return noise
+
+
 def _simulate(d: Draws, width: int, height: int, path: np.ndarray, *, noise: SEMNoise,
               probe: ProbeGeometry, clutter: Clutter, background=None, visible=None,
               angle_deg=None) -> Sequence:
@@ -212,6 +239,7 @@ def _simulate(d: Draws, width: int, height: int, path: np.ndarray, *, noise: SEM
     angle = d("probe_angle_deg") if angle_deg is None else angle_deg
     beam_sigma = None  # from the pixel size (semlab.sim.optics)
     clutter, visible = _ablated(d, clutter, visible)
+    noise = _ablated_noise(d, noise, FRAME_PERIOD, width * height)
     if getattr(d, "noise_free", False):
         # the ground-truth tests' view: the probe alone, no noise, blurred by 1 px (a sampled
         # centroid then aliases by < 2e-3 px: tests/test_sim_render.py)
@@ -420,7 +448,7 @@ def _family_list():
                        n_frames=Int(50, 50), substrate=Choice(("flat", "fractal", "grains")),
                        texture_strength=Uniform(0.02, 0.12), fractal_beta=Uniform(2.0, 3.5), grain_px=Uniform(6.0, 25.0),
                        scan_line_jitter_px=Uniform(0.1, 0.5), image_drift_px_per_s=Uniform(0.5, 3.0),
-                       speed_px_per_frame=Uniform(0.3, 1.5)), _substrates, ablations=("occluder",)),
+                       speed_px_per_frame=Uniform(0.3, 1.5)), _substrates, ablations=("occluder", *NOISE_ABLATIONS)),
         Family("semi_real", "the real FIB/SEM needle of data/real-sem cut out and moved by exact sub-pixel "
                "Fourier shifts over real backgrounds from other frames, shot noise at several doses",
                SEMI_REAL_RANGES, _semi_real, ablations=()),
@@ -439,8 +467,8 @@ def check_ablations(names, without) -> tuple[str, ...]:
     Raises
     ------
     ValueError
-        An unknown part, or one the family cannot take out (the substrate of ``substrates`` and
-        anything of ``semi_real`` are not drawn through the simulator's clutter).
+        An unknown part, or one the family cannot take out (the substrate of ``substrates`` is not
+        drawn through the simulator's clutter, nothing of ``semi_real`` through the simulator).
     """
     without = (without,) if isinstance(without, str) else tuple(without)
     unknown = sorted(set(without) - set(ABLATIONS))
@@ -450,7 +478,7 @@ def check_ablations(names, without) -> tuple[str, ...]:
         refused = sorted(set(without) - set(FAMILIES[name].ablations))
         if refused:
             raise ValueError(f"family {name!r} cannot take out {refused}: its scenes do not draw them through the "
-                             f"simulator's clutter (it can take out: {', '.join(FAMILIES[name].ablations) or 'nothing'})")
+                             f"simulator (it can take out: {', '.join(FAMILIES[name].ablations) or 'nothing'})")
     return without
 
 
@@ -460,8 +488,8 @@ def make_family_sequence(name: str, seed: int, *, noise_free: bool = False, with
     ``noise_free=True`` (for tests of the ground truth) renders the same probe along the same path
     with no noise, clutter or texture: a flat background, so that the frames show the probe alone.
     ``without`` takes parts of the scene out (:data:`ABLATIONS`: ``"texture"``, the substrate's
-    texture, whose amplitude becomes :data:`ABLATED_TEXTURE`; ``"occluder"``), every other draw
-    kept: the same probe, path, particles and noise.
+    texture, whose amplitude becomes :data:`ABLATED_TEXTURE`; ``"occluder"``; and parts of the noise,
+    :data:`NOISE_ABLATIONS`), every other draw kept: the same probe, path, particles and noise draws.
 
     Returns
     -------
