@@ -71,3 +71,9 @@ def test_the_table_is_the_median_over_the_seeds():
     runs = {"as drawn": pd.concat([_per_frame("still", s, (0, 0), (sd, sd), rng) for s, sd in ((1, 0.1), (2, 0.2), (3, 0.9))])}
     table = budget_table(error_budget(runs, bound))
     assert table["scatter_over_crb"].iloc[0] == pytest.approx(2.0, rel=0.1) and "noise_share" not in table
+
+
+def test_no_run_is_a_clear_error():
+    bound = pd.DataFrame({"family": ["still"], "seed": [1], "crb_x_px": [0.1], "crb_y_px": [0.1]})
+    with pytest.raises(ValueError, match="at least one run"):
+        error_budget({}, bound)

@@ -78,7 +78,8 @@ def _add_evaluate_parser(sub, fmt) -> None:
                    help="a semlab.Tracker parameter for the 'semlab' tracker (repeatable)")
     e.add_argument("--without", metavar="PART,...",
                    help="take parts out of every scene, every other draw kept (an ablation): texture, occluder, "
-                        "line_noise, photometric_jitter, noise (all but a 50x dose's shot noise)")
+                        "line_noise, photometric_jitter, noise (all of it but a 50x dose's shot noise and a tenth of the "
+                        "read noise)")
     e.add_argument("--scheduler", metavar="ADDRESS",
                    help="tcp://HOST:PORT of a running dask scheduler, or 'inline' (default: a LocalCluster)")
     e.add_argument("--workers", type=int, metavar="N", help="LocalCluster workers (default: the cores, at most 2)")

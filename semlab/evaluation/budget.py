@@ -74,6 +74,11 @@ def error_budget(runs: Mapping[str, pd.DataFrame], bound: pd.DataFrame, skip: in
     skip : int
         As :func:`sequence_errors`.
 
+    Raises
+    ------
+    ValueError
+        ``runs`` is empty.
+
     Returns
     -------
     DataFrame
@@ -81,6 +86,8 @@ def error_budget(runs: Mapping[str, pd.DataFrame], bound: pd.DataFrame, skip: in
         ``scatter_over_crb`` and ``bias_over_crb`` (the RMS over the two axes of each axis's scatter
         or bias over its bound).
     """
+    if not runs:
+        raise ValueError("error_budget needs at least one run (a condition and its per-frame table)")
     crb = bound[["family", "seed", "crb_x_px", "crb_y_px"]].drop_duplicates(["family", "seed"])
     parts = []
     for condition, per_frame in runs.items():

@@ -55,6 +55,7 @@ SCENE_ABLATIONS = ("texture", "occluder")
 #: (the frames' gain and offset fluctuations and jumps, the probe's charging), ``"noise"`` (both, and
 #: the shot and read noise nearly all: what is left of a tracker's error is its systematic part).
 NOISE_ABLATIONS = ("line_noise", "photometric_jitter", "noise")
+#: Every part ``without`` can name (each family says which of them it can take out).
 ABLATIONS = SCENE_ABLATIONS + NOISE_ABLATIONS
 #: ``"noise"``: the dose this many times the drawn one (the shot noise's sd 1/√50 ≈ 1/7 of it) and the
 #: read noise this fraction of it. Not 0: the trackers measure the noise, and a noise-free frame
