@@ -227,8 +227,8 @@ def registration_band(contour: ContourTemplate, widths: tuple[int, int]) -> np.n
     return band
 
 
-def flattened_background(template, region) -> np.ndarray:
-    """``template`` with its background :data:`FLAT_FROM_PX` or more from ``region`` replaced by its local mean.
+def flattened_background(template, region, from_px: float = FLAT_FROM_PX, *, mean_of_flattened: bool = False) -> np.ndarray:
+    """``template`` with its background ``from_px`` or more from ``region`` replaced by its local mean.
 
     The band's background pixels do not move with the object: in every later frame another patch of
     the substrate lies beside it. A textured background kept in the template pulls each registration
@@ -243,6 +243,13 @@ def flattened_background(template, region) -> np.ndarray:
     template : (h, w) array_like
     region : (h, w) array_like of bool
         The object.
+    from_px : float
+        Distance (px) from ``region`` where the flattening starts (:data:`FLAT_FROM_PX`).
+    mean_of_flattened : bool
+        The local mean of the flattened pixels alone (the static background layer's flattening,
+        :mod:`semlab.tracking.layer`, from a few px: there the blurred edge's tail, nearer, would give a
+        flat background a slope towards the object), or of all the background (the textured substrates'
+        flattening from 1 px, as measured).
 
     Returns
     -------
@@ -250,10 +257,10 @@ def flattened_background(template, region) -> np.ndarray:
     """
     img = np.asarray(template, np.float32)
     region = np.asarray(region, bool)
-    background = (~region).astype(np.float32)
-    mean = cv2.GaussianBlur(img * background, (0, 0), FLAT_SIGMA_PX) / np.maximum(
-        cv2.GaussianBlur(background, (0, 0), FLAT_SIGMA_PX), 1e-6)
-    far = cv2.distanceTransform(background.astype(np.uint8), cv2.DIST_L2, 3) >= FLAT_FROM_PX
+    far = cv2.distanceTransform((~region).astype(np.uint8), cv2.DIST_L2, 3) >= from_px
+    weight = (far if mean_of_flattened else ~region).astype(np.float32)
+    mean = cv2.GaussianBlur(img * weight, (0, 0), FLAT_SIGMA_PX) / np.maximum(
+        cv2.GaussianBlur(weight, (0, 0), FLAT_SIGMA_PX), 1e-6)
     out = img.copy()
     out[far] = mean[far]
     return out
@@ -355,6 +362,9 @@ class BandModel:
         The scan line's correlation the template was whitened with (0: not whitened).
     n_averaged : int
         Frames the template averages.
+    denoised : (h, w) ndarray or None
+        The whitened template around the band, denoised for the Jacobian (``jacobian_denoise``; None:
+        not denoised), which a model of the same template flattened can reuse (:func:`build_band_model`).
     """
 
     points: np.ndarray
@@ -370,6 +380,7 @@ class BandModel:
     jacobian_sigma: float
     rho: float
     n_averaged: int
+    denoised: np.ndarray | None = None
 
     def inside_image(self, roi, shift, shape, *, margin: int = 2, fraction: float = 1.0) -> bool:
         """Whether at least ``fraction`` of the band lies ``margin`` px inside an image of ``shape``
@@ -423,24 +434,30 @@ def _jacobian_sigma(values, inside, noise: NoiseModel, n_averaged: int, options:
                          jac.jacobian_sigma_first))
 
 
-def _jacobian(template, whitened, values, noise, rho, n_averaged, sigma_j, options: TrackerOptions, used):
-    """The template's gradients (eq. 8's 5-point mask) that serve as the Jacobian, on the crop.
+def _jacobian(template, whitened, values, noise, rho, n_averaged, sigma_j, options: TrackerOptions, used,
+              reuse=None):
+    """``(gx, gy, denoised)``: the template's gradients (eq. 8's 5-point mask) that serve as the Jacobian,
+    on the crop, and the denoised crop they were taken from (None: not denoised).
 
     From the lightly smoothed template: a noisy Jacobian inflates the variance along the weakly
     constrained direction (along the shaft, only the apex tells x); the curvature then comes from
     the image (see :func:`semlab.tracking.registration.register`). ``used`` ``(x0, y0, x1, y1)``:
     the crop's box that holds the band, where the gradients are read (elsewhere they are not
-    those of the whole template).
+    those of the whole template). ``reuse`` ``(denoised, flat)``: the denoised crop of the same template
+    before its background ``flat`` (a crop-sized mask) was flattened: the flattened pixels, a smooth local
+    mean already, are taken as they are and the rest from ``denoised`` (NL-means' cost once, not twice).
     """
     jac = options.jacobian
-    source = whitened
-    if jac.jacobian_denoise and n_averaged >= DENOISE_FROM_FRAMES:
+    source, denoised = whitened, None
+    if jac.jacobian_denoise and n_averaged >= DENOISE_FROM_FRAMES and reuse is not None and reuse[0] is not None:
+        denoised = source = np.where(reuse[1], whitened, reuse[0]).astype(np.float32)
+    elif jac.jacobian_denoise and n_averaged >= DENOISE_FROM_FRAMES:
         # The Jacobian from the template denoised by non-local means: its noise (and the averaged
         # template's leftover) enters every estimate through the gradients.
         noise_sd = float(np.sqrt((1.0 - rho ** 2) * np.mean(noise.variance(values)) / n_averaged))
         reach = FIVE_POINT_REACH_PX + (_gaussian_reach(sigma_j) if sigma_j > 0 else 0)
-        source = _denoised_around(whitened, _grown(used, reach, whitened.shape), jac.jacobian_denoise * noise_sd,
-                                  noise_sd)
+        denoised = source = _denoised_around(whitened, _grown(used, reach, whitened.shape),
+                                             jac.jacobian_denoise * noise_sd, noise_sd)
     gx, gy = five_point_gradients(cv2.GaussianBlur(source, (0, 0), sigma_j) if sigma_j > 0 else source)
     if jac.normal_sigma > 0:
         # Keep only the gradient's component along the edge normal, whose direction comes from the
@@ -451,7 +468,7 @@ def _jacobian(template, whitened, values, noise, rho, n_averaged, sigma_j, optio
         nx, ny = nx / norm, ny / norm
         along = gx * nx + gy * ny
         gx, gy = along * nx, along * ny
-    return gx, gy
+    return gx, gy, denoised
 
 
 def _gaussian_reach(sigma: float) -> int:
@@ -512,7 +529,7 @@ def _setups(fine: Level, smoothed: list[Level], weights, inside, options: Tracke
 
 
 def build_band_model(template, contour: ContourTemplate, band, noise: NoiseModel, options: TrackerOptions, *,
-                     n_averaged: int = 1, consistency=None) -> BandModel:
+                     n_averaged: int = 1, consistency=None, reuse=None) -> BandModel:
     """Everything the per-frame registration needs from ``template``, computed once (offline).
 
     Parameters
@@ -530,6 +547,9 @@ def build_band_model(template, contour: ContourTemplate, band, noise: NoiseModel
         Frames the template averages (its noise variance is a frame's over this).
     consistency : (K,) ndarray or None
         Per-band-pixel weights from the template averaging (0: static background).
+    reuse : (BandModel, (h, w) ndarray of bool) or None
+        ``template`` is that model's template with the masked pixels' background flattened
+        (:func:`flattened_background`): its denoised Jacobian source is reused there.
     """
     ys, xs = np.nonzero(band)
     points = np.stack([xs, ys], axis=1).astype(np.float64)  # ROI coordinates
@@ -551,8 +571,9 @@ def build_band_model(template, contour: ContourTemplate, band, noise: NoiseModel
     at = (ys - sy0, xs - sx0)
     inside = contour.region[ys, xs]
     sigma_j = _jacobian_sigma(values, inside, noise, n_averaged, options)
-    gx, gy = _jacobian(near, whitened, values, noise, rho, n_averaged, sigma_j, options,
-                       used=(bx0 - sx0, by0 - sy0, bx1 - sx0, by1 - sy0))
+    gx, gy, denoised = _jacobian(near, whitened, values, noise, rho, n_averaged, sigma_j, options,
+                                 used=(bx0 - sx0, by0 - sy0, bx1 - sx0, by1 - sy0),
+                                 reuse=None if reuse is None else (reuse[0].denoised, reuse[1][sy0:sy1, sx0:sx1]))
     fine = Level(0.0, whitened[at].astype(np.float64), gx[at].astype(np.float64), gy[at].astype(np.float64))
     # The same, smoothed: the first, robust stage of every frame's registration.
     smooth = cv2.GaussianBlur(whitened, (0, 0), coarse_sigma) if coarse_sigma > 0 else whitened
@@ -575,4 +596,4 @@ def build_band_model(template, contour: ContourTemplate, band, noise: NoiseModel
         # Noise variance of the (whitened, averaged) template at the band pixels.
         template_variance=(1.0 - rho ** 2) * noise.variance(values) / n_averaged,
         instrument=instrument, fine=fine, smoothed=smoothed, jacobian_sigma=sigma_j, rho=rho,
-        n_averaged=n_averaged)
+        n_averaged=n_averaged, denoised=denoised)

@@ -7,7 +7,9 @@ search (:mod:`semlab.tracking.search`) over the window (the whole image after a 
 fail (an edge's contrast vanishing at contact with a sample, a brightness jump), the
 re-acquisition by contrast-blind correlation. The template is averaged over the first
 registered frames (:mod:`semlab.tracking.averaging`), frame 0 re-registered against it as the
-origin.
+origin. Once the object has moved, the static background beside it is learned in frame coordinates
+and its texture taken off the frames, which are then registered against the template with its
+background flattened (:mod:`semlab.tracking.layer`).
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from .band import (
     registration_band,
 )
 from .consistency import band_quadrants, quadrant_influence
+from .layer import GATE_PX, BackgroundLayer, far_from_region, far_px, object_support
 from .method import Method, Motion, Setup, Verdict
 from .registration import FitResult, OffImage, Start, register
 from .search import coarse_mask, coarse_search, coarse_template, reacquire
@@ -41,7 +44,8 @@ from .uncertainty import (
 
 __all__ = ["ICMethod"]
 
-#: A prediction that was within this many px last frame is "steady": the smoothed stage is skipped.
+#: A prediction that was within this many px last frame is "steady": the smoothed stage is skipped,
+#: and the static background's texture is taken off the frame (:mod:`semlab.tracking.layer`).
 STEADY_PX = 1.0
 #: A steady fit that has to move more than this (px) is a change of speed: the smoothed stage's job.
 STEADY_MAX_MOVE_PX = 3.0
@@ -85,6 +89,17 @@ class ICMethod(Method):
         #: The template's background is flattened for the band model (:func:`~semlab.tracking.band.
         #: flattened_background`) over a strongly textured substrate.
         self.flatten = setup.texture >= FLAT_BACKGROUND_TEXTURE
+        #: The static background (:mod:`semlab.tracking.layer`), learned while the object has not moved
+        #: and acting once it has (:attr:`layer_on`). None: ``static_background`` off, or a strongly
+        #: textured substrate, whose template is flattened from frame 0 on: there the layer's texture,
+        #: learned from a few frames of grains 1.5-2.2× the noise, took the probe more than 1 px off on more
+        #: frames that said ok than it saved (the substrates family's spare seeds).
+        self.layer, self.layer_on = None, False
+        self.far_px = far_px(setup.edge_sigma)
+        if self.options.band.static_background and not self.flatten:
+            level = float(np.mean(setup.patch[~setup.contour.region])) if not setup.contour.region.all() else 0.0
+            noise_var = float(np.asarray(setup.noise.variance(level)))
+            self.layer = BackgroundLayer(setup.image.shape, setup.roi, setup.texture ** 2 * noise_var, noise_var)
         self.rho = setup.noise.rho if self.options.photometry.whiten else 0.0
         self.n_averaged = 1
         #: Covariance (px²) of the origin, frame 0's shift against the current template (0 while
@@ -100,6 +115,8 @@ class ICMethod(Method):
         #: The last accepted fit, when tiles were trimmed from it, and the band model it used.
         self._trimmed = (None, None)
         self._build()
+        if self.layer is not None:
+            self.layer.add(setup.image, np.zeros(2), 1.0, 0.0, self.rho, self.far)
         self.averager = None
         if self.options.averaging.template_frames > 1:
             first = store_frame(setup.image, self.roi, np.zeros(2), 1.0, 0.0)
@@ -108,24 +125,57 @@ class ICMethod(Method):
 
     def _build(self) -> None:
         """The band model and the coarse template of the current template (offline)."""
+        #: The object, its thin apex's blurred end included (:func:`~semlab.tracking.layer.object_support`),
+        #: and the template's background away from it and its blurred edge (:func:`~semlab.tracking.layer.far_px`).
+        self.support = object_support(self.template, self.contour.region, 2 * self.far_px)
+        self.far = far_from_region(self.support, self.far_px)
         template = flattened_background(self.template, self.contour.region) if self.flatten else self.template
-        self.model = build_band_model(template, self.contour, self.band, self.noise, self.options,
-                                      n_averaged=self.n_averaged, consistency=self.consistency)
+        #: The band model of the template, and (once the static background acts) of the template
+        #: flattened beyond :attr:`far_px`, for the frames its texture is taken off
+        #: (:meth:`prepare`): a frame and its model see the background alike.
+        self.models = {False: self._band_model(template)}
+        if self.layer_on:
+            self.models[True] = self._flattened_model()
+        self.model = self.models[False]
         factor = self.options.search.coarse_factor
         if self._coarse_mask is None:  # made once per contour: frame 0's, then the averaged template's
             self._coarse_mask = coarse_mask(self.contour.region, self.band, factor)
         self.coarse = coarse_template(self.template, self._coarse_mask, factor)
         self.quadrants = band_quadrants(self.model.points)
         self.tiles = band_tiles(self.model.points)
+        self._use(self.model)
+
+    def _flattened_template(self) -> np.ndarray:
+        """The template with its background flattened beyond :attr:`far_px` (the static background's frames)."""
+        return flattened_background(self.template, self.support, self.far_px, mean_of_flattened=True)
+
+    def _band_model(self, template, reuse=None):
+        return build_band_model(template, self.contour, self.band, self.noise, self.options,
+                                n_averaged=self.n_averaged, consistency=self.consistency, reuse=reuse)
+
+    def _flattened_model(self):
+        """The band model of :meth:`_flattened_template`, reusing the template's own denoised Jacobian
+        source away from the flattened pixels."""
+        return self._band_model(self._flattened_template(), reuse=(self.models[False], self.far))
+
+    def _use(self, model) -> None:
+        """Register with ``model`` (one of :attr:`models`) and measure the fits against it."""
+        self.model = model
         #: The object's contrast in the (whitened) template the fits' residuals are measured against.
-        self.contrast = region_contrast(self.model.fine.values, self.model.inside, default=0.0)
+        self.contrast = region_contrast(model.fine.values, model.inside, default=0.0)
         #: The band's template gradients (K, 2), the Jacobian up to the fit's gain.
-        self.gradients = np.stack([self.model.fine.gx, self.model.fine.gy], axis=1)
+        self.gradients = np.stack([model.fine.gx, model.fine.gy], axis=1)
 
     def _register(self, arr, start: Start, **kw) -> FitResult:
         return register(arr, self.model, start, self.roi, self.options, **kw)
 
     def _register_stored(self, stored) -> FitResult:
+        """A stored frame (as it came: no texture taken off) registered against the flattened template once
+        the static background acts (its texture is then noise about the answer, not a pull towards where the
+        template was taken: :func:`~semlab.tracking.band.flattened_background`)."""
+        model = self.models[self.layer_on]
+        if self.model is not model:
+            self._use(model)
         fit = self._register(stored.area, Start(stored.shift, stored.gain, stored.offset), at=stored.at,
                              robust_start=False)
         return self._trim(stored.area, fit, at=stored.at)[0]
@@ -166,6 +216,16 @@ class ICMethod(Method):
     def predict(self, motion: Motion) -> np.ndarray:
         """The constant-velocity prediction."""
         return motion.shift + motion.velocity
+
+    def prepare(self, arr, predicted, motion: Motion) -> np.ndarray:
+        """The frame with the static background's texture taken off where the template, at the
+        prediction, is background (:meth:`~semlab.tracking.layer.BackgroundLayer.detextured`), once the
+        layer acts and while the prediction holds (a jump's frame is registered as it came)."""
+        detexture = self.layer_on and motion.prediction_error < STEADY_PX
+        model = self.models[detexture]
+        if model is not self.model:
+            self._use(model)
+        return self.layer.detextured(arr, predicted, self.gain, self.far) if detexture else arr
 
     def follow(self, arr, predicted, motion: Motion) -> FitResult | None:
         """Registration from the prediction: while tracking it is within a fraction of a pixel
@@ -310,9 +370,12 @@ class ICMethod(Method):
         against the template that measured it, with that template's origin; a template refreshed
         from this frame brings its own origin, and the motion moves into its coordinates."""
         fit = verdict.found
-        if self.averager is None or not isinstance(fit, FitResult) or not (
-                fit.inliers > AVERAGE_MIN_INLIERS
+        if not isinstance(fit, FitResult) or not (
+                fit.inliers > AVERAGE_MIN_INLIERS and self.scores
                 and fit.score >= AVERAGE_MIN_SCORE_FRACTION * np.median(self.scores)):
+            return None
+        self._learn_background(arr, fit)
+        if self.averager is None:
             return None
         stored = store_frame(arr, self.roi, fit.shift, fit.gain, fit.offset)
         if stored is None or not self.averager.as_noisy_as_the_first(stored, AVERAGE_MAX_NOISE_RATIO):
@@ -320,6 +383,18 @@ class ICMethod(Method):
         origin = self.origin.copy()
         self._average(stored)
         return self.origin - origin
+
+    # ---- the static background
+    def _learn_background(self, arr, fit: FitResult) -> None:
+        """A well-registered frame's background enters the layer; the layer acts (and the band model
+        sees the template's background flattened beyond :attr:`far_px`) once the object has moved
+        :data:`~semlab.tracking.layer.GATE_PX` from the origin."""
+        if self.layer is None:
+            return
+        self.layer.add(arr, fit.shift, fit.gain, fit.offset, self.rho, self.far)
+        if not self.layer_on and np.hypot(*(fit.shift - self.origin)) > GATE_PX:
+            self.layer_on = True
+            self.models[True] = self._flattened_model()
 
     # ---- template averaging
     def _average(self, stored) -> None:

@@ -125,6 +125,8 @@ class Setup:
     noise: NoiseModel
     to_8bit: tuple[float, float]
     texture: float = 0.0
+    #: The edge's blur (px, :func:`~semlab.tracking.band.edge_blur`), NaN when not measured.
+    edge_sigma: float = float("nan")
 
 
 class Method:
@@ -168,6 +170,11 @@ class Method:
     def predict(self, motion: Motion) -> np.ndarray:
         """Where the template is expected (the search window is centred there): the last shift."""
         return motion.shift
+
+    def prepare(self, arr, predicted, motion: Motion) -> np.ndarray:
+        """The frame the method registers (``"ic"``: the static background's texture taken off,
+        :mod:`semlab.tracking.layer`); :meth:`after_accept` still sees ``arr`` as it came."""
+        return arr
 
     def follow(self, arr, predicted, motion: Motion):
         """Track from the prediction (not called after a loss); None: nothing to refine."""

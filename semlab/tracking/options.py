@@ -170,6 +170,10 @@ class BandOptions:
     #: ``"ic"``: particles touching the probe in frame 0 are cut off the contour region and the band
     #: keeps clear of them (:mod:`semlab.tracking.attached`).
     cut_attached: bool = True
+    #: ``"ic"``: once the object has moved, the background beside it is learned in frame coordinates and
+    #: its texture taken off the frames, the template's flattened (:mod:`semlab.tracking.layer`). Off by
+    #: default: not better than without it on the corpus's development and test seeds (README).
+    static_background: bool = False
 
     def __post_init__(self):
         if self.band_px is not None and not _is_count(self.band_px, 1):
@@ -178,7 +182,7 @@ class BandOptions:
             _refuse("background_tile", self.background_tile, "be a non-negative integer")
         _normalise(self, band_px=None if self.band_px is None else int(self.band_px),
                    inner_px=int(self.inner_px), background_tile=int(self.background_tile),
-                   cut_attached=bool(self.cut_attached))
+                   cut_attached=bool(self.cut_attached), static_background=bool(self.static_background))
 
 
 @dataclass(frozen=True)

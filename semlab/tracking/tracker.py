@@ -69,6 +69,15 @@ class Tracker:
         background's texture is at least :data:`~semlab.tracking.band.NARROW_BAND_TEXTURE` times
         the noise, and both sides reach across a blurred edge (3 σ of frame 0's edge blur, at most
         5 px: :attr:`edge_sigma`; see :meth:`band_widths`).
+    static_background : bool
+        ``"ic"``: once the object has moved :data:`~semlab.tracking.layer.GATE_PX` from where it
+        started, the background beside it is learned in frame coordinates from the well-registered
+        frames, its texture taken off each frame where the template is background, and the template's
+        background flattened for the band model (:mod:`semlab.tracking.layer`): a static texture no
+        longer matches itself where the template was taken. A still probe's template keeps its
+        background (there it is information). Off by default: on the corpus it takes most of the
+        texture-driven silent frames off clutter's spare seeds but is not better on the development and
+        test seeds, and flags more frames on one of the 200-px moves (README).
     inner_px : int
         ``"ic"``: on the object's side the band reaches this deep (its pixels move with the
         object and fix its gray level).
@@ -247,7 +256,7 @@ class Tracker:
         if not (self.options.photometry.whiten or self.options.photometry.noise_weights):
             noise = NoiseModel()
         algorithm = METHOD_CLASSES[self.method](self.options)
-        algorithm.start(Setup(image, roi, patch, contour, band, widths, noise, to_8bit, self.texture))
+        algorithm.start(Setup(image, roi, patch, contour, band, widths, noise, to_8bit, self.texture, self.edge_sigma))
         self.algorithm, self.noise, self.roi, self.attached = algorithm, noise, roi, attached
         #: Whether each followed answer may be reported (:mod:`semlab.tracking.trust`).
         self.judge = Judge(self.options.loss, self.contrast_noise, algorithm)
@@ -363,6 +372,7 @@ class Tracker:
         """predicted → (followed) → searched → re-acquired → verdict."""
         method, motion = self.algorithm, self.motion
         predicted = method.predict(motion)
+        raw, arr = arr, method.prepare(arr, predicted, motion)
         window = search_window(self.roi, self.options.search.search_size, predicted, arr.shape, whole=motion.lost)
         found = None if motion.lost else method.follow(arr, predicted, motion)
         widened = False
@@ -378,8 +388,8 @@ class Tracker:
             if not acceptable or (widened and not method.good(found)):
                 verdict = method.reacquire(arr, window, predicted)
                 if verdict is not None and (not acceptable or verdict.score > found.score):
-                    return self._conclude(arr, verdict, predicted)
-        return self._conclude(arr, method.verdict(arr, found, predicted), predicted)
+                    return self._conclude(raw, verdict, predicted)
+        return self._conclude(raw, method.verdict(arr, found, predicted), predicted)
 
     def _search_whole_frame(self, arr, window, predicted, found):
         """``(found, widened)`` after a search of the whole frame, for a window that gave no good match.
