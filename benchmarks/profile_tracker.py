@@ -4,8 +4,9 @@ Run ``PYTHONPATH=$PWD python benchmarks/profile_tracker.py [--sequence moves_200
 ``--family wander --seed 100`` for a sequence of the evaluation corpus (where the speed target is judged:
 tune on its development seeds).
 Frames are classed as "averaging" (the template is still being averaged, the first
-``template_frames`` registered frames), "move" (the constant-velocity prediction was off by more
-than 1 px, so the smoothed first stage or the coarse search ran) or "steady".
+``template_frames`` registered frames), "move" (the last frame's constant-velocity prediction was off
+by more than 1 px, so the smoothed first stage or the coarse search ran), "jump" (it held, but this
+frame's missed by more than 1 px: the steady fit gave up and the coarse search ran) or "steady".
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from semlab.metrics import run_tracker
 from semlab.peers import MatchTemplatePeer
 from semlab.sim import make_sequence
 from semlab.tracking import Tracker
+from semlab.tracking.ic import STEADY_PX
 
 
 def load(kind: str, seed: int = 0, family: str | None = None):
@@ -46,11 +48,12 @@ def profile(kind: str, seed: int = 0, repeats: int = 3, clock=time.perf_counter,
         run, cls = [], []
         for frame in seq.frames[1:]:
             averaging = t.algorithm.averager is not None
-            steady = t.motion.prediction_error < 1.0
+            steady = t.motion.prediction_error < STEADY_PX
             t0 = clock()
             t.update(frame)
             run.append(1e3 * (clock() - t0))
-            cls.append("averaging" if averaging else ("steady" if steady else "move"))
+            held = t.motion.prediction_error < STEADY_PX  # this frame's prediction (inf when lost)
+            cls.append("averaging" if averaging else ("move" if not steady else ("steady" if held else "jump")))
         times.append(run)
         classes = cls
     ms = np.median(np.array(times), axis=0)

@@ -14,6 +14,7 @@ from semlab.tracking.band import FLAT_SIGMA_PX
 from semlab.tracking.layer import (
     FAR_PER_EDGE_BLUR,
     MIN_FAR_PX,
+    MIN_TEXTURE,
     REFRESH_FRAMES,
     BackgroundLayer,
     far_from_region,
@@ -150,18 +151,21 @@ def _track(frames, roi, **options):
 
 def test_a_still_probe_s_track_is_untouched_and_a_moving_one_switches_the_layer_on():
     texture, rng = _texture(), np.random.default_rng(2)
-    weak = texture / 6  # about as strong as the noise
-    still = [_textured_frame(0.0, weak, rng) for _ in range(12)]
+    moderate = texture / 2.5  # about as strong as the noise: Tracker.texture 1.1
+    still = [_textured_frame(0.0, moderate, rng) for _ in range(12)]
     on, track_on = _track(still, ROI)
     off, track_off = _track(still, ROI, static_background=False)
     assert on.algorithm.layer is not None and not on.algorithm.layer_on and off.algorithm.layer is None
     assert np.array_equal(track_on, track_off)  # the still probe's template keeps its background
 
-    # Over this strong texture (6x the noise) the template's background is flattened from frame 0 on, and no
-    # layer is learned; over a texture about as strong as the noise, the layer acts once the probe has moved.
+    # Over this strong texture (6x the noise) the template's background is flattened from frame 0 on, and over
+    # a faint one (half the noise) there is little to take off: no layer is learned in either; over a texture
+    # about as strong as the noise, the layer acts once the probe has moved.
     strong, _ = _track([_textured_frame(0.0, texture, rng) for _ in range(2)], ROI)
     assert strong.algorithm.flatten and strong.algorithm.layer is None
-    moving = [_textured_frame(0.5 * k, weak, rng) for k in range(12)]
+    faint, _ = _track([_textured_frame(0.0, texture / 6, rng) for _ in range(2)], ROI)
+    assert faint.texture < MIN_TEXTURE and faint.algorithm.layer is None
+    moving = [_textured_frame(0.5 * k, moderate, rng) for k in range(12)]
     t, track = _track(moving, ROI)
     method = t.algorithm
     assert not method.flatten and method.layer_on and set(method.models) == {False, True}

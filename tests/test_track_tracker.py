@@ -109,8 +109,9 @@ CONTRACT = {
     "choose": None,
     # issue 14: particles touching the probe in frame 0 are cut off its region (semlab.tracking.attached)
     "cut_attached": True,
-    # issue 14: opt-in, the static background beside a moving probe learned and its texture taken off
-    "static_background": False,
+    # issue 14: over a textured background, the static background beside a moving probe learned and its texture
+    # taken off (semlab.tracking.layer)
+    "static_background": True,
 }
 
 

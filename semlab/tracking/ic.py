@@ -27,7 +27,7 @@ from .band import (
     registration_band,
 )
 from .consistency import band_quadrants, quadrant_influence
-from .layer import GATE_PX, BackgroundLayer, far_from_region, far_px, object_support
+from .layer import GATE_PX, MIN_TEXTURE, BackgroundLayer, far_from_region, far_px, object_support
 from .method import Method, Motion, Setup, Verdict
 from .registration import FitResult, OffImage, Start, register
 from .search import coarse_mask, coarse_search, coarse_template, reacquire
@@ -90,13 +90,14 @@ class ICMethod(Method):
         #: flattened_background`) over a strongly textured substrate.
         self.flatten = setup.texture >= FLAT_BACKGROUND_TEXTURE
         #: The static background (:mod:`semlab.tracking.layer`), learned while the object has not moved
-        #: and acting once it has (:attr:`layer_on`). None: ``static_background`` off, or a strongly
+        #: and acting once it has (:attr:`layer_on`). None: ``static_background`` off, a background with
+        #: little texture (under :data:`~semlab.tracking.layer.MIN_TEXTURE`), or a strongly
         #: textured substrate, whose template is flattened from frame 0 on: there the layer's texture,
         #: learned from a few frames of grains 1.5-2.2× the noise, took the probe more than 1 px off on more
         #: frames that said ok than it saved (the substrates family's spare seeds).
         self.layer, self.layer_on = None, False
         self.far_px = far_px(setup.edge_sigma)
-        if self.options.band.static_background and not self.flatten:
+        if self.options.band.static_background and MIN_TEXTURE <= setup.texture and not self.flatten:
             level = float(np.mean(setup.patch[~setup.contour.region])) if not setup.contour.region.all() else 0.0
             noise_var = float(np.asarray(setup.noise.variance(level)))
             self.layer = BackgroundLayer(setup.image.shape, setup.roi, setup.texture ** 2 * noise_var, noise_var)

@@ -24,12 +24,16 @@ import numpy as np
 
 from .band import FLAT_SIGMA_PX
 
-__all__ = ["BackgroundLayer", "far_from_region", "far_px", "object_support", "GATE_PX"]
+__all__ = ["BackgroundLayer", "far_from_region", "far_px", "object_support", "GATE_PX", "MIN_TEXTURE"]
 
 #: The layer acts once an accepted answer is this far (px) from the origin: beside a still probe the
 #: template's background is the frames' background, information, not a pull (a still probe's
 #: development seeds lose nothing to the layer gated here, and gain nothing: flattening it costs them).
 GATE_PX = 0.75
+#: The layer is learned only where frame 0's background texture (:func:`~semlab.tracking.band.background_texture`)
+#: is at least this many times the noise: under it there is little texture to take off, and the flattened
+#: template alone only costs the fits information (more frames flagged, none fewer wrong).
+MIN_TEXTURE = 1.0
 #: Pixels this many times the edge's blur (:func:`~semlab.tracking.band.edge_blur`) from the object's
 #: region, and at least :data:`MIN_FAR_PX`, are background: nearer, the blurred edge moves with the object.
 FAR_PER_EDGE_BLUR = 3.0

@@ -171,9 +171,9 @@ class BandOptions:
     #: keeps clear of them (:mod:`semlab.tracking.attached`).
     cut_attached: bool = True
     #: ``"ic"``: once the object has moved, the background beside it is learned in frame coordinates and
-    #: its texture taken off the frames, the template's flattened (:mod:`semlab.tracking.layer`). Off by
-    #: default: not better than without it on the corpus's development and test seeds (README).
-    static_background: bool = False
+    #: its texture taken off the frames, the template's flattened (:mod:`semlab.tracking.layer`), where frame
+    #: 0's background is textured (:data:`~semlab.tracking.layer.MIN_TEXTURE`).
+    static_background: bool = True
 
     def __post_init__(self):
         if self.band_px is not None and not _is_count(self.band_px, 1):

@@ -74,10 +74,10 @@ class Tracker:
         started, the background beside it is learned in frame coordinates from the well-registered
         frames, its texture taken off each frame where the template is background, and the template's
         background flattened for the band model (:mod:`semlab.tracking.layer`): a static texture no
-        longer matches itself where the template was taken. A still probe's template keeps its
-        background (there it is information). Off by default: on the corpus it takes most of the
-        texture-driven silent frames off clutter's spare seeds but is not better on the development and
-        test seeds, and flags more frames on one of the 200-px moves (README).
+        longer matches itself where the template was taken. Only where frame 0's background texture
+        is at least :data:`~semlab.tracking.layer.MIN_TEXTURE` times the noise (and under
+        :data:`~semlab.tracking.band.FLAT_BACKGROUND_TEXTURE`, where the template is flattened from frame
+        0 on); a still probe's template keeps its background (there it is information). False: off.
     inner_px : int
         ``"ic"``: on the object's side the band reaches this deep (its pixels move with the
         object and fix its gray level).
