@@ -24,7 +24,7 @@ import numpy as np
 
 from .band import FLAT_SIGMA_PX
 
-__all__ = ["BackgroundLayer", "far_from_region", "far_px", "object_support", "GATE_PX", "MIN_TEXTURE"]
+__all__ = ["GATE_PX", "MIN_TEXTURE", "BackgroundLayer", "far_from_region", "far_px", "object_support"]
 
 #: The layer acts once an accepted answer is this far (px) from the origin: beside a still probe the
 #: template's background is the frames' background, information, not a pull (a still probe's
@@ -100,7 +100,7 @@ class BackgroundLayer:
     def _boxes(self, shift, shape):
         """``(frame slices, template slices)`` of the ROI moved by ``round(shift)``, clipped to the frame."""
         x0, y0, w, h = self.roi
-        fx, fy = x0 + int(round(shift[0])), y0 + int(round(shift[1]))
+        fx, fy = x0 + round(shift[0]), y0 + round(shift[1])
         ax, ay = max(fx, 0), max(fy, 0)
         bx, by = min(fx + w, shape[1]), min(fy + h, shape[0])
         if bx <= ax or by <= ay:
