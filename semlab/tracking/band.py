@@ -48,6 +48,7 @@ __all__ = [
     "contour_band",
     "contour_core",
     "edge_blur",
+    "far_from_region",
     "flattened_background",
     "inner_mask",
     "region_contrast",
@@ -227,6 +228,12 @@ def registration_band(contour: ContourTemplate, widths: tuple[int, int]) -> np.n
     return band
 
 
+def far_from_region(region, distance: float) -> np.ndarray:
+    """Bool mask of the pixels at least ``distance`` px from ``region`` (True where background)."""
+    background = (~np.asarray(region, bool)).astype(np.uint8)
+    return cv2.distanceTransform(background, cv2.DIST_L2, 3) >= distance
+
+
 def flattened_background(template, region, from_px: float = FLAT_FROM_PX, *, mean_of_flattened: bool = False) -> np.ndarray:
     """``template`` with its background ``from_px`` or more from ``region`` replaced by its local mean.
 
@@ -257,7 +264,7 @@ def flattened_background(template, region, from_px: float = FLAT_FROM_PX, *, mea
     """
     img = np.asarray(template, np.float32)
     region = np.asarray(region, bool)
-    far = cv2.distanceTransform((~region).astype(np.uint8), cv2.DIST_L2, 3) >= from_px
+    far = far_from_region(region, from_px)
     weight = (far if mean_of_flattened else ~region).astype(np.float32)
     mean = cv2.GaussianBlur(img * weight, (0, 0), FLAT_SIGMA_PX) / np.maximum(
         cv2.GaussianBlur(weight, (0, 0), FLAT_SIGMA_PX), 1e-6)

@@ -126,10 +126,11 @@ class ICMethod(Method):
 
     def _build(self) -> None:
         """The band model and the coarse template of the current template (offline)."""
-        #: The object, its thin apex's blurred end included (:func:`~semlab.tracking.layer.object_support`),
-        #: and the template's background away from it and its blurred edge (:func:`~semlab.tracking.layer.far_px`).
-        self.support = object_support(self.template, self.contour.region, 2 * self.far_px)
-        self.far = far_from_region(self.support, self.far_px)
+        if self.layer is not None:
+            #: The object, its thin apex's blurred end included (:func:`~semlab.tracking.layer.object_support`),
+            #: and the template's background away from it and its blurred edge (:func:`~semlab.tracking.layer.far_px`).
+            self.support = object_support(self.template, self.contour.region, 2 * self.far_px)
+            self.far = far_from_region(self.support, self.far_px)
         template = flattened_background(self.template, self.contour.region) if self.flatten else self.template
         #: The band model of the template, and (once the static background acts) of the template
         #: flattened beyond :attr:`far_px`, for the frames its texture is taken off

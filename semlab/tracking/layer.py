@@ -22,7 +22,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from .band import FLAT_SIGMA_PX
+from .band import FLAT_SIGMA_PX, far_from_region
 
 __all__ = ["GATE_PX", "MIN_TEXTURE", "BackgroundLayer", "far_from_region", "far_px", "object_support"]
 
@@ -52,12 +52,6 @@ def far_px(edge_sigma: float) -> float:
     return max(MIN_FAR_PX, FAR_PER_EDGE_BLUR * blur)
 
 
-def far_from_region(region, distance: float) -> np.ndarray:
-    """Bool mask of the pixels at least ``distance`` px from ``region`` (True where background)."""
-    background = (~np.asarray(region, bool)).astype(np.uint8)
-    return cv2.distanceTransform(background, cv2.DIST_L2, 3) >= distance
-
-
 def object_support(template, region, reach: float) -> np.ndarray:
     """``region`` and the pixels within ``reach`` px of it that still stand out from the background by
     :data:`SUPPORT_CONTRAST` of the object's contrast (bool, the template's shape).
@@ -71,7 +65,7 @@ def object_support(template, region, reach: float) -> np.ndarray:
         return region
     background = float(np.median(img[~region]))
     contrast = float(np.median(img[region])) - background
-    near = cv2.distanceTransform((~region).astype(np.uint8), cv2.DIST_L2, 3) < reach
+    near = ~far_from_region(region, reach)
     standing_out = (img - background) * np.sign(contrast) > SUPPORT_CONTRAST * abs(contrast)
     return region | (near & standing_out)
 

@@ -229,15 +229,8 @@ class Tracker:
             Bad frame (dtype, dimensions, NaN/inf, empty), ROI not wholly inside the frame or too
             small, a constant ROI, or no usable contour in the ROI.
         """
-        as_gray_float(frame)  # a clear error for a bad frame 0, before anything is scaled
-        self.scale = GrayScale.of(frame)
-        frame = self.scale.apply(np.asarray(frame))
-        image = as_gray_float(frame)
-        roi = check_roi(roi, image.shape, min_size=MIN_ROI_PX)
+        frame, image, roi, patch = self._frame0(frame, roi)
         x0, y0, w, h = roi
-        patch = image[y0:y0 + h, x0:x0 + w].copy()
-        if float(patch.max() - patch.min()) <= 0:
-            raise ValueError(f"the ROI {roi} is constant: nothing to track")
         # The frame's own gray levels (uint8 as they are), so a manual threshold means the same
         # here as in identify_contour_template and the TemplateExplorer.
         raw = GrayScale.as_8bit(np.asarray(frame)[y0:y0 + h, x0:x0 + w])
@@ -245,11 +238,7 @@ class Tracker:
         # How identify_contour_template mapped frame 0's gray levels onto 0-255 (uint8 as they are).
         to_8bit = (0.0, 1.0) if raw.dtype == np.uint8 else (
             float(patch.min()), 255.0 / max(float(patch.max() - patch.min()), 1e-12))
-        noise = estimate_noise(patch)
-        contrast, smoothed_sd = _check_contrast(patch, contour, noise, roi, self.options.template.sigma)
-        self.contrast_noise = contrast / smoothed_sd if smoothed_sd > 0 else float("inf")
-        self.texture = background_texture(patch, contour.region, noise)
-        self.edge_sigma = edge_blur(patch, contour, contrast)
+        noise = self._measure(patch, contour, roi)
         widths = self.band_widths()
         contour, attached = self._cut_attached(contour, raw)
         band = _checked_band(clear_band(registration_band(contour, widths), attached, contour.region), roi)
@@ -264,6 +253,36 @@ class Tracker:
         self.centre0 = np.array(roi_centre(roi))
         # Frame 0 is the origin of every displacement: its position is the ROI's centre by definition.
         return TrackResult(float(self.centre0[0]), float(self.centre0[1]), 1.0, True, sigma_x=0.0, sigma_y=0.0)
+
+    def _frame0(self, frame, roi):
+        """``(frame, image, roi, patch)``: frame 0 on the tracker's gray scale (:attr:`scale`, set here),
+        as float, the checked ROI and its patch.
+
+        Raises
+        ------
+        TypeError, ValueError
+            Bad frame, ROI not wholly inside it or too small, or a constant ROI.
+        """
+        as_gray_float(frame)  # a clear error for a bad frame 0, before anything is scaled
+        self.scale = GrayScale.of(frame)
+        frame = self.scale.apply(np.asarray(frame))
+        image = as_gray_float(frame)
+        roi = check_roi(roi, image.shape, min_size=MIN_ROI_PX)
+        x0, y0, w, h = roi
+        patch = image[y0:y0 + h, x0:x0 + w].copy()
+        if float(patch.max() - patch.min()) <= 0:
+            raise ValueError(f"the ROI {roi} is constant: nothing to track")
+        return frame, image, roi, patch
+
+    def _measure(self, patch, contour: ContourTemplate, roi) -> NoiseModel:
+        """Frame 0's noise (returned), and :attr:`contrast_noise`, :attr:`texture` and :attr:`edge_sigma`
+        (set); raises ValueError when the contour is not resolved from the noise at all (:func:`_check_contrast`)."""
+        noise = estimate_noise(patch)
+        contrast, smoothed_sd = _check_contrast(patch, contour, noise, roi, self.options.template.sigma)
+        self.contrast_noise = contrast / smoothed_sd if smoothed_sd > 0 else float("inf")
+        self.texture = background_texture(patch, contour.region, noise)
+        self.edge_sigma = edge_blur(patch, contour, contrast)
+        return noise
 
     def _cut_attached(self, contour: ContourTemplate, raw) -> tuple[ContourTemplate, np.ndarray | None]:
         """Frame 0's ``contour`` without the substrate Otsu's level joined to it and, where its outline is
