@@ -53,14 +53,21 @@ Modules
     Template averaging over the first frames and the consistency of the band's pixels.
 ``method``
     The interface the Tracker drives, the motion state and a frame's verdict.
+``trimming``
+    The band's misfit tiles dropped and the frame refitted.
+``layer``
+    The static background beside a moving probe, learned in frame coordinates, its texture taken off the frames.
 ``uncertainty``, ``consistency``
     Each frame's ``sigma_x``, ``sigma_y`` and the tests behind the flags; whether the band's quadrants agree.
 ``trust``
     :class:`~semlab.tracking.trust.Judge`: whether a followed answer may be reported, or why not.
 ``ic``, ``paper``
     One object per algorithm: ``"ic"``; ``"contour"``, ``"ssd"``, ``"hb"``.
+``stepper``
+    :class:`~semlab.tracking.stepper.Stepper`: one frame through predicted → (followed) → searched →
+    re-acquired → verdict, judged and reported.
 ``tracker``
-    :class:`Tracker`: frame 0's set-up, then predicted → searched → re-acquired → verdict.
+    :class:`Tracker`: frame 0's set-up; every later frame through its stepper.
 ``run``
     :func:`track` and the frame loop it shares with :func:`semlab.metrics.run_tracker`.
 """

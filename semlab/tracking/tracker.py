@@ -1,8 +1,8 @@
-"""The :class:`Tracker`: frame 0's template, then every frame through one short state machine."""
+"""The :class:`Tracker`: frame 0's template and set-up; every later frame goes through its
+:class:`~semlab.tracking.stepper.Stepper`."""
 
 from __future__ import annotations
 
-import dataclasses
 import inspect
 
 import cv2
@@ -15,11 +15,11 @@ from .attached import MAX_OUTLINE_NOISE, clear_band, without_attached
 from .band import MIN_BAND_PIXELS, background_texture, band_widths, edge_blur, registration_band
 from .frames import GrayScale, as_frame
 from .ic import ICMethod
-from .method import Method, Motion, Setup, Verdict
+from .method import Method, Motion, Setup
 from .options import DEFAULT_METHOD, KEYWORD_GROUP, TrackerOptions
 from .paper import ContourMethod, HBMethod, SSDMethod
 from .result import TrackResult
-from .search import search_window
+from .stepper import Stepper
 from .trust import Judge
 
 __all__ = ["METHOD_CLASSES", "Tracker"]
@@ -210,6 +210,7 @@ class Tracker:
         self.edge_sigma = 0.0
         self.roi = None
         self.algorithm: Method | None = None
+        self.stepper: Stepper | None = None
         #: The particles cut off frame 0's contour region (ROI-sized bool mask; None: none cut), set by init()
         #: (:mod:`semlab.tracking.attached`).
         self.attached = None
@@ -247,12 +248,13 @@ class Tracker:
         algorithm = METHOD_CLASSES[self.method](self.options)
         algorithm.start(Setup(image, roi, patch, contour, band, widths, noise, to_8bit, self.texture, self.edge_sigma))
         self.algorithm, self.noise, self.roi, self.attached = algorithm, noise, roi, attached
-        #: Whether each followed answer may be reported (:mod:`semlab.tracking.trust`).
-        self.judge = Judge(self.options.loss, self.contrast_noise, algorithm)
-        self.motion = Motion()
-        self.centre0 = np.array(roi_centre(roi))
         # Frame 0 is the origin of every displacement: its position is the ROI's centre by definition.
-        return TrackResult(float(self.centre0[0]), float(self.centre0[1]), 1.0, True, sigma_x=0.0, sigma_y=0.0)
+        centre0 = roi_centre(roi)
+        #: Every later frame's states (:mod:`semlab.tracking.stepper`), its answers judged by
+        #: :mod:`semlab.tracking.trust`.
+        self.stepper = Stepper(algorithm, Judge(self.options.loss, self.contrast_noise, algorithm), roi,
+                               self.options.search.search_size, self.options.loss.max_poor_jump, centre0)
+        return TrackResult(float(centre0[0]), float(centre0[1]), 1.0, True, sigma_x=0.0, sigma_y=0.0)
 
     def _frame0(self, frame, roi):
         """``(frame, image, roi, patch)``: frame 0 on the tracker's gray scale (:attr:`scale`, set here),
@@ -338,6 +340,16 @@ class Tracker:
         return self.algorithm.template
 
     @property
+    def centre0(self) -> np.ndarray:
+        """Frame 0's answer, the ROI's centre (px)."""
+        return self.stepper.centre0
+
+    @property
+    def motion(self) -> Motion:
+        """The target's motion state (:class:`~semlab.tracking.method.Motion`)."""
+        return self.stepper.motion
+
+    @property
     def shift(self) -> np.ndarray:
         """The template's last shift against the ROI (:attr:`motion`)."""
         return self.motion.shift
@@ -379,95 +391,13 @@ class Tracker:
         try:
             arr = self.scale.apply(as_frame(frame))
         except (TypeError, ValueError) as err:
-            return self._lose(f"unusable frame: {err}")
+            return self.stepper.lose(f"unusable frame: {err}")
         if arr.shape[0] < self.roi[3] + FRAME_OVER_ROI_PX or arr.shape[1] < self.roi[2] + FRAME_OVER_ROI_PX:
-            return self._lose(f"frame {arr.shape} is smaller than the ROI")
+            return self.stepper.lose(f"frame {arr.shape} is smaller than the ROI")
         try:
-            return self._step(arr)
+            return self.stepper.step(arr)
         except FRAME_ERRORS as err:
-            return self._lose(f"{err}")
-
-    def _step(self, arr) -> TrackResult:
-        """predicted → (followed) → searched → re-acquired → verdict."""
-        method, motion = self.algorithm, self.motion
-        predicted = method.predict(motion)
-        raw, arr = arr, method.prepare(arr, predicted, motion)
-        window = search_window(self.roi, self.options.search.search_size, predicted, arr.shape, whole=motion.lost)
-        found = None if motion.lost else method.follow(arr, predicted, motion)
-        widened = False
-        if not method.good(found):
-            found = method.search(arr, window, predicted, found)
-            if method.widens_search and not motion.lost and not method.good(found):
-                found, widened = self._search_whole_frame(arr, window, predicted, found)
-        # A match from the whole frame that is poorer than the track's typical one competes with the
-        # re-acquisition in the window: a whole frame holds many such matches of texture that is not
-        # the object (the real needle at contact, where its gray levels jump).
-        if not motion.lost:
-            acceptable = method.acceptable(found)
-            if not acceptable or (widened and not method.good(found)):
-                verdict = method.reacquire(arr, window, predicted)
-                if verdict is not None and (not acceptable or verdict.score > found.score):
-                    return self._conclude(raw, verdict, predicted)
-        return self._conclude(raw, method.verdict(arr, found, predicted), predicted)
-
-    def _search_whole_frame(self, arr, window, predicted, found):
-        """``(found, widened)`` after a search of the whole frame, for a window that gave no good match.
-
-        The object may be farther than the window reaches (a feed-forward step, the paper's 200-px
-        moves in two frames). When the window's match is not acceptable, the whole frame's stands in
-        for it, rather than a lost frame. When it is acceptable but poor, it may be something else
-        that looks partly like the object (after a jump out of the window), and the whole frame's
-        match replaces it only when clearly better.
-        """
-        method = self.algorithm
-        whole = search_window(self.roi, self.options.search.search_size, predicted, arr.shape, whole=True)
-        if whole == window:
-            return found, False
-        if not method.acceptable(found):
-            return method.search(arr, whole, predicted, found), True
-        other = method.search(arr, whole, predicted, None)
-        return (other, True) if method.clearly_better(other, found) else (found, False)
-
-    def _conclude(self, arr, verdict: Verdict, predicted) -> TrackResult:
-        if not verdict.ok:
-            return self._lose(verdict.reason)
-        motion = self.motion
-        jump, expected = motion.record_miss(verdict.shift, predicted, verdict.reacquired,
-                                            self.options.loss.max_poor_jump or 0.0)
-        result = self._accept(verdict.shift, verdict.score)
-        uncertainty = self.algorithm.sigma(verdict)
-        moved = self.algorithm.after_accept(arr, verdict)
-        if moved is not None:  # the template's origin moved: the state follows (the position stays)
-            motion.shift = motion.shift + moved
-        reason = (self.judge.distrust(uncertainty)
-                  or self.judge.doubt_jump(jump, expected, verdict.score, drifted=verdict.drifted)
-                  or self.judge.doubt_match(verdict.score))
-        if reason is not None:
-            # Followed (the motion moves on, the next frame starts from here; a frame that
-            # registered well still improves the template) but not trusted: a flag is better than
-            # a number that may be a pixel off.
-            return TrackResult(float("nan"), float("nan"), result.score, False, reason)
-        if uncertainty is None:
-            return result
-        sx, sy = uncertainty.sigma
-        return dataclasses.replace(result, sigma_x=float(sx), sigma_y=float(sy))
-
-    def _lose(self, reason: str) -> TrackResult:
-        motion = self.motion
-        motion.prediction_error = motion.miss = np.inf
-        motion.lost = True
-        motion.n_lost += 1
-        motion.velocity[:] = 0.0
-        return TrackResult(float("nan"), float("nan"), 0.0, False, reason)
-
-    def _accept(self, shift, score) -> TrackResult:
-        motion = self.motion
-        shift = np.asarray(shift, float)
-        motion.velocity = shift - motion.shift if not motion.lost else np.zeros(2)
-        motion.shift = shift
-        motion.lost = False
-        x, y = self.centre0 + shift - self.algorithm.origin
-        return TrackResult(float(x), float(y), float(score), True)
+            return self.stepper.lose(f"{err}")
 
 
 # The contract's keywords, defaults and annotations, as inspect.signature and typing.get_type_hints
