@@ -60,8 +60,8 @@ from scipy.stats import siegelslopes
 
 from ..template import ContourTemplate, brightest_of_three, edge_strength, identify_contour_template
 
-__all__ = ["BAND_CLEARANCE_PX", "MAX_OUTLINE_NOISE", "apex_bumps", "attached_pieces", "clear_band", "substrate_pieces",
-           "without_attached"]
+__all__ = ["BAND_CLEARANCE_PX", "MAX_OUTLINE_NOISE", "apex_bumps", "attached_pieces", "clear_band", "cut_off",
+           "substrate_pieces", "without_attached"]
 
 
 class Opening(NamedTuple):
@@ -389,16 +389,22 @@ def without_attached(contour: ContourTemplate, patch, *, choose: str = "central"
     pieces = particles | (substrate_pieces(contour, **segmentation) & ~beside)
     if not pieces.any():
         return contour, None
+    cut = cut_off(contour, pieces, choose=choose)
+    return (contour, None) if cut is None else (cut, pieces)
+
+
+def cut_off(contour: ContourTemplate, pieces, *, choose: str = "central") -> ContourTemplate | None:
+    """``contour`` with ``pieces`` (ROI-sized bool mask) and the 1-px neck that joined them cut off its
+    region: the external contour of what remains that ``choose`` picks; None when nothing usable remains."""
     # One px more than the piece: the neck that joined it goes too.
-    neck = cv2.dilate(pieces.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+    neck = cv2.dilate(np.asarray(pieces, np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
     remaining = np.where(contour.region & ~neck, 255, 0).astype(np.uint8)
     try:  # what remains, chosen as frame 0's contour was (no smoothing, no morphology)
         found = identify_contour_template(remaining, sigma=0, threshold=127, morph_kernel=0, choose=choose)
     except ValueError:
-        return contour, None
-    cut = dataclasses.replace(contour, points=found.points, mask=found.mask, region=found.region,
-                              hierarchy=found.hierarchy, contours=found.contours, area=found.area)
-    return cut, pieces
+        return None
+    return dataclasses.replace(contour, points=found.points, mask=found.mask, region=found.region,
+                               hierarchy=found.hierarchy, contours=found.contours, area=found.area)
 
 
 def clear_band(band, pieces, region=None) -> np.ndarray:

@@ -127,6 +127,9 @@ class Setup:
     texture: float = 0.0
     #: The edge's blur (px, :func:`~semlab.tracking.band.edge_blur`), NaN when not measured.
     edge_sigma: float = float("nan")
+    #: The particles frame 0's cut took off the region (ROI-sized bool mask; None: none), which the band keeps
+    #: clear of (:mod:`semlab.tracking.attached`).
+    attached: np.ndarray | None = None
 
 
 class Method:

@@ -246,7 +246,8 @@ class Tracker:
         if not (self.options.photometry.whiten or self.options.photometry.noise_weights):
             noise = NoiseModel()
         algorithm = METHOD_CLASSES[self.method](self.options)
-        algorithm.start(Setup(image, roi, patch, contour, band, widths, noise, to_8bit, self.texture, self.edge_sigma))
+        algorithm.start(Setup(image, roi, patch, contour, band, widths, noise, to_8bit, self.texture, self.edge_sigma,
+                              attached))
         self.algorithm, self.noise, self.roi, self.attached = algorithm, noise, roi, attached
         # Frame 0 is the origin of every displacement: its position is the ROI's centre by definition.
         centre0 = roi_centre(roi)
