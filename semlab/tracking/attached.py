@@ -163,6 +163,16 @@ def _apex(region: np.ndarray) -> tuple[int, int] | None:
     return int(x), int(y)
 
 
+def _distance_to_apex(region: np.ndarray, apex) -> np.ndarray | None:
+    """Every pixel's distance (px) to ``apex`` (None: no apex, no map). The 3×3 chamfer metric is
+    symmetric, so the apex's distance to a piece is this map's least value over it."""
+    if apex is None:
+        return None
+    away = np.ones(region.shape, np.uint8)
+    away[apex[1], apex[0]] = 0
+    return cv2.distanceTransform(away, cv2.DIST_L2, 3)
+
+
 def _body(region: np.ndarray, radius: int) -> np.ndarray:
     """The opening of the region's main part with a disc of ``radius``: its largest component after
     the erosion, dilated back. A particle wider than the disc survives the erosion as a component of
@@ -208,13 +218,7 @@ def attached_pieces(region, patch) -> np.ndarray:
         return cut
     probe, background = levels
     apex = _apex(region)
-    to_apex = None
-    # Every pixel's distance to the apex, once: the 3×3 chamfer metric is symmetric, so the apex's
-    # distance to a piece is this map's least value over it.
-    if apex is not None:
-        away = np.ones(region.shape, np.uint8)
-        away[apex[1], apex[0]] = 0
-        to_apex = cv2.distanceTransform(away, cv2.DIST_L2, 3)
+    to_apex = _distance_to_apex(region, apex)
     for opening in OPENINGS:
         shaved = (region & ~_body(region, opening.radius)).astype(np.uint8)
         n, labels, stats, _ = cv2.connectedComponentsWithStats(shaved, connectivity=4)

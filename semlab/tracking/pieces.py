@@ -29,7 +29,15 @@ import math
 import cv2
 import numpy as np
 
-from .attached import BAND_CLEARANCE_PX, OPENINGS, _apex, _body, _disc, _particle_sized
+from .attached import (
+    BAND_CLEARANCE_PX,
+    OPENINGS,
+    _apex,
+    _body,
+    _disc,
+    _distance_to_apex,
+    _particle_sized,
+)
 from .consistency import INFLUENCE_CHI2, MIN_QUADRANT_PIXELS
 
 __all__ = ["APEX_CLEARANCE_PX", "MIN_PULL_PX", "PULL_CHI2", "band_masks", "loose_pieces", "pulls"]
@@ -60,12 +68,7 @@ def loose_pieces(region) -> list[np.ndarray]:
         The contour template's region after the geometric cut.
     """
     region = np.asarray(region, bool)
-    apex = _apex(region)
-    to_apex = None
-    if apex is not None:
-        away = np.ones(region.shape, np.uint8)
-        away[apex[1], apex[0]] = 0
-        to_apex = cv2.distanceTransform(away, cv2.DIST_L2, 3)
+    to_apex = _distance_to_apex(region, _apex(region))
     pieces = []
     for opening in OPENINGS:
         shaved = (region & ~_body(region, opening.radius)).astype(np.uint8)
