@@ -18,7 +18,6 @@ from __future__ import annotations
 import numpy as np
 
 from ..template import identify_contour_template
-from .attached import clear_band, cut_off
 from .averaging import TemplateAverager, consistency_weights, store_frame
 from .band import (
     FLAT_BACKGROUND_TEXTURE,
@@ -31,7 +30,7 @@ from .band import (
 from .consistency import band_quadrants, quadrant_influence
 from .layer import GATE_PX, MIN_TEXTURE, BackgroundLayer, far_from_region, far_px, object_support
 from .method import Method, Motion, Setup, Verdict
-from .pieces import band_masks, loose_pieces, pulls
+from .pieces import LoosePieces, loose_pieces, pulls
 from .registration import FitResult, OffImage, Start, register
 from .search import coarse_mask, coarse_search, coarse_template, reacquire
 from .trimming import MIN_MISFIT_CONTRAST, trim_misfit_tiles
@@ -110,12 +109,9 @@ class ICMethod(Method):
         #: frame 0 is the template).
         self.origin_cov = np.zeros((2, 2))
         self.consistency = None
-        #: The pieces cut off the region because they did not move with the object (ROI-sized bool mask; None:
-        #: none; :meth:`_cut_pulling`), frame 0's cut pieces, and the pieces still to be judged
-        #: (:mod:`semlab.tracking.pieces`).
-        self.pieces_cut, self.attached = None, setup.attached
-        self._loose = loose_pieces(setup.contour.region) if self.options.band.cut_attached else []
-        self._piece_masks = None
+        #: The pieces frame 0's cut left, judged by the frames (:meth:`_cut_pulling`, :mod:`semlab.tracking.pieces`).
+        self.pieces = LoosePieces(loose_pieces(setup.contour.region) if self.options.band.cut_attached else [],
+                                  setup.attached)
         self.gain, self.offset = 1.0, 0.0
         self.scores: list[float] = []
         #: The recent frames' precisions, by which each frame's is judged.
@@ -325,45 +321,34 @@ class ICMethod(Method):
             self.scores.append(fit.score)
         return Verdict.accept(fit.shift, fit.score, found=fit)
 
+    @property
+    def pieces_cut(self) -> np.ndarray | None:
+        """The pieces the frames cut off the region (ROI-sized bool mask; None: none)."""
+        return self.pieces.cut
+
     def _cut_pulling(self, arr, fit: FitResult) -> FitResult:
         """``fit``, or its refit once a piece that pulls it is cut off (:mod:`semlab.tracking.pieces`); judged
         while the template is averaged (the first frames)."""
-        if not self._loose or self.averager is None:
+        if not self.pieces.pending or self.averager is None:
             return fit
-        if self._piece_masks is None:
-            self._piece_masks = band_masks(self.model.points, self._loose)
-        for piece, mask in zip(self._loose, self._piece_masks):
-            if mask is None:
-                continue
+        for piece, mask in self.pieces.judged(self.model.points):
             try:
                 rest = register(arr, self.model.reweighted(~mask, self.options), Start(fit.shift, fit.gain, fit.offset),
                                 self.roi, self.options, robust_start=False)
             except (ValueError, np.linalg.LinAlgError):
                 continue
-            if rest.converged and pulls(fit.shift, rest.shift, rest.covariance()) and self._cut_piece(piece):
-                refit = self._register(arr, Start(rest.shift, rest.gain, rest.offset), robust_start=False)
-                return refit if refit.converged else rest
+            if not (rest.converged and pulls(fit.shift, rest.shift, rest.covariance())):
+                continue
+            cut = self.pieces.cut_off(self.contour, piece, self.widths, choose=self.options.template.choose or "central")
+            if cut is None:
+                continue
+            self.contour, self.band = cut
+            self._coarse_mask = None  # the coarse search's mask follows the new region
+            self._build()
+            self._trimmed = (None, None)
+            refit = self._register(arr, Start(rest.shift, rest.gain, rest.offset), robust_start=False)
+            return refit if refit.converged else rest
         return fit
-
-    def _cut_piece(self, piece) -> bool:
-        """Cut ``piece`` off the contour's region and re-draw the band clear of it and of frame 0's cut
-        pieces, as frame 0's cut does (:func:`~semlab.tracking.attached.cut_off`); False when too little
-        would remain."""
-        contour = cut_off(self.contour, piece, choose=self.options.template.choose or "central")
-        if contour is None:
-            return False
-        cut = piece if self.pieces_cut is None else self.pieces_cut | piece
-        band = clear_band(registration_band(contour, self.widths), cut if self.attached is None else cut | self.attached,
-                          contour.region)
-        if band.sum() < MIN_BAND_PIXELS:
-            return False
-        self.pieces_cut, self.contour, self.band = cut, contour, band
-        self._loose = [p for p in self._loose if p is not piece]
-        self._piece_masks = self._coarse_mask = None
-        self._build()
-        self._piece_masks = band_masks(self.model.points, self._loose)
-        self._trimmed = (None, None)
-        return True
 
     def sigma(self, verdict: Verdict) -> Uncertainty | None:
         """The frame's fit (or the re-acquired match's) and the origin's, and the model error once
@@ -515,5 +500,4 @@ class ICMethod(Method):
             return
         self.contour, self.band = contour, band
         self._coarse_mask = None  # the coarse search's mask follows the new region
-        # The cut pieces' band pixels were the old band's (and the pieces' frames are over).
-        self._piece_masks, self._loose = None, []
+        self.pieces.forget()  # the pieces' frames are over

@@ -37,10 +37,13 @@ from .attached import (
     _disc,
     _distance_to_apex,
     _particle_sized,
+    clear_band,
+    cut_off,
 )
+from .band import MIN_BAND_PIXELS, registration_band
 from .consistency import INFLUENCE_CHI2, MIN_QUADRANT_PIXELS
 
-__all__ = ["APEX_CLEARANCE_PX", "MIN_PULL_PX", "PULL_CHI2", "band_masks", "loose_pieces", "pulls"]
+__all__ = ["APEX_CLEARANCE_PX", "MIN_PULL_PX", "PULL_CHI2", "LoosePieces", "band_masks", "loose_pieces", "pulls"]
 
 #: A shaved piece this near (px) the apex is the probe's end (a thin tip's end is what every opening
 #: shaves first): never tested, never cut.
@@ -123,3 +126,50 @@ def pulls(shift, rest_shift, rest_covariance) -> bool:
     except np.linalg.LinAlgError:
         return False
     return chi2 > PULL_CHI2
+
+
+class LoosePieces:
+    """One track's loose pieces: those still to be judged, and those the frames cut.
+
+    Parameters
+    ----------
+    pending : list of (h, w) bool arrays
+        :func:`loose_pieces` of frame 0's region (empty: nothing to judge).
+    attached : (h, w) bool array or None
+        What frame 0's geometric cut took (:mod:`semlab.tracking.attached`): a re-drawn band keeps clear of it too.
+    """
+
+    def __init__(self, pending, attached=None):
+        self.pending = list(pending)
+        self.attached = attached
+        #: The pieces the frames cut (ROI-sized bool mask; None: none).
+        self.cut = None
+        self._masks = None  # (points, masks) of the band they were taken on
+
+    def judged(self, points):
+        """``(piece, band mask)`` of each pending piece that can be judged on the band ``points``
+        (:func:`band_masks`, computed once per band)."""
+        if self._masks is None or self._masks[0] is not points:
+            self._masks = (points, band_masks(points, self.pending))
+        return [(piece, mask) for piece, mask in zip(self.pending, self._masks[1]) if mask is not None]
+
+    def cut_off(self, contour, piece, widths, *, choose: str = "central"):
+        """``(contour, band)``: ``contour`` without ``piece`` and the band re-drawn clear of it, of the pieces cut
+        before and of frame 0's (:func:`~semlab.tracking.attached.cut_off`, :func:`~semlab.tracking.attached.
+        clear_band`), the piece then counted cut; None (nothing recorded) when too little would remain."""
+        cut_contour = cut_off(contour, piece, choose=choose)
+        if cut_contour is None:
+            return None
+        cut = piece if self.cut is None else self.cut | piece
+        band = clear_band(registration_band(cut_contour, widths), cut if self.attached is None else cut | self.attached,
+                          cut_contour.region)
+        if band.sum() < MIN_BAND_PIXELS:
+            return None
+        self.cut = cut
+        self.pending = [p for p in self.pending if p is not piece]
+        self._masks = None
+        return cut_contour, band
+
+    def forget(self) -> None:
+        """Judge no more pieces (the band was re-drawn from another contour: the masks were the old band's)."""
+        self.pending, self._masks = [], None
