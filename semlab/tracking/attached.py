@@ -34,7 +34,8 @@ describes the probe: the region fills the wedge between its flanks (:data:`MIN_W
 gripper's gap does not) and the tip is thin (:data:`MAX_WEDGE_HALF_WIDTH_PX`; a wide end face fixes
 both axes by itself). Left in the template, such a particle holds the answer back along the shaft,
 where only the apex tells the position, by a pixel or more with a good score (the corpus's clutter
-family at low beam current: ``benchmarks/bench_corpus.py``).
+family at low beam current: ``benchmarks/bench_corpus.py``). Smaller or less round pieces outside the
+wedge (:func:`apex_pieces`) are left for the frames to judge (:mod:`semlab.tracking.pieces`).
 
 Over a textured substrate Otsu's level, pulled down by the many background pixels, joins the bright
 grains beside the probe to it: the region reaches over them, often by more than the probe's own area
@@ -60,7 +61,7 @@ from scipy.stats import siegelslopes
 
 from ..template import ContourTemplate, brightest_of_three, edge_strength, identify_contour_template
 
-__all__ = ["BAND_CLEARANCE_PX", "MAX_OUTLINE_NOISE", "apex_bumps", "attached_pieces", "clear_band", "cut_off",
+__all__ = ["BAND_CLEARANCE_PX", "MAX_OUTLINE_NOISE", "apex_bumps", "apex_pieces", "attached_pieces", "clear_band", "cut_off",
            "substrate_pieces", "without_attached"]
 
 
@@ -334,19 +335,32 @@ def apex_bumps(region, apex=None) -> np.ndarray:
     """
     region = np.asarray(region, bool)
     cut = np.zeros(region.shape, bool)
+    for bump in apex_pieces(region, apex, min_area=MIN_BUMP_PX, min_roundness=MIN_BUMP_ROUNDNESS):
+        cut |= bump
+    return cut
+
+
+def apex_pieces(region, apex=None, *, min_area: int, min_roundness: float) -> list[np.ndarray]:
+    """The pieces of ``region`` outside the wedge of a thin tip's flanks near its ``apex``
+    (:data:`BUMP_REACH_PX`), of at least ``min_area`` px² (up to :data:`MAX_PIECE_PX`, off the ROI's
+    border) that fill at least ``min_roundness`` of their enclosing circle: ROI-sized bool masks, none
+    where the region is no thin wedge or has no apex (:func:`apex_bumps` cuts those of a particle's size
+    and shape; :mod:`semlab.tracking.pieces` lets the frames judge smaller ones)."""
+    region = np.asarray(region, bool)
     apex = _apex(region) if apex is None else apex
     wedge = None if apex is None else _wedge(region, apex)
     if wedge is None:
-        return cut
+        return []
     yy, xx = np.mgrid[:region.shape[0], :region.shape[1]]
     outside = region & ~wedge & (np.hypot(xx - apex[0], yy - apex[1]) <= BUMP_REACH_PX)
     n, labels, stats, _ = cv2.connectedComponentsWithStats(outside.astype(np.uint8), connectivity=4)
+    pieces = []
     for i in range(1, n):
         bump = labels == i
-        if (_particle_sized(stats[i], MIN_BUMP_PX, region.shape)
-                and _round(bump, int(stats[i, cv2.CC_STAT_AREA]), MIN_BUMP_ROUNDNESS)):
-            cut |= bump
-    return cut
+        if (_particle_sized(stats[i], min_area, region.shape)
+                and _round(bump, int(stats[i, cv2.CC_STAT_AREA]), min_roundness)):
+            pieces.append(bump)
+    return pieces
 
 
 def _particle_sized(stats, min_area: int, shape) -> bool:

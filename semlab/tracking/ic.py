@@ -30,7 +30,7 @@ from .band import (
 from .consistency import band_quadrants, quadrant_influence
 from .layer import GATE_PX, MIN_TEXTURE, BackgroundLayer, far_from_region, far_px, object_support
 from .method import Method, Motion, Setup, Verdict
-from .pieces import LoosePieces, loose_pieces, pulls
+from .pieces import LoosePieces, loose_pieces
 from .registration import FitResult, OffImage, Start, register
 from .search import coarse_mask, coarse_search, coarse_template, reacquire
 from .trimming import MIN_MISFIT_CONTRAST, trim_misfit_tiles
@@ -331,15 +331,15 @@ class ICMethod(Method):
         while the template is averaged (the first frames)."""
         if not self.pieces.pending or self.averager is None:
             return fit
-        for piece, mask in self.pieces.judged(self.model.points):
+        for index, mask in self.pieces.judged(self.model.points):
             try:
                 rest = register(arr, self.model.reweighted(~mask, self.options), Start(fit.shift, fit.gain, fit.offset),
                                 self.roi, self.options, robust_start=False)
             except (ValueError, np.linalg.LinAlgError):
                 continue
-            if not (rest.converged and pulls(fit.shift, rest.shift, rest.covariance())):
+            if not (rest.converged and self.pieces.pulling(index, fit.shift, rest.shift, rest.covariance())):
                 continue
-            cut = self.pieces.cut_off(self.contour, piece, self.widths, choose=self.options.template.choose or "central")
+            cut = self.pieces.cut_off(self.contour, index, self.widths, choose=self.options.template.choose or "central")
             if cut is None:
                 continue
             self.contour, self.band = cut

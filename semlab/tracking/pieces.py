@@ -19,15 +19,27 @@ and the band is re-drawn clear of it, as frame 0's cut does (only weighing its b
 enough: the particle then slides along the flank's band in template coordinates, which reads as the flank
 moving out, and an analytic wedge drifted 2.7 px forward), and the frame is refitted from the refit's
 answer. A piece of the probe, left out, leaves the answer where it was, within the noise: it stays.
-A piece the openings shave together with the tip's end (a particle at the apex) is not reached.
+
+A particle fused with a thin tip's end is shaved together with it by every opening; what the frames can
+judge of it is its part outside the wedge of the tip's flanks (:func:`~semlab.tracking.attached.apex_pieces`,
+smaller and less round than the geometric cut takes). Left out, it takes the band beside the apex with it,
+and the rest hardly fixes the position along the shaft: no single frame's move is significant (the corpus's
+clutter development seed 106: χ² 0.3-5 a frame, the probe held back by up to 2 px later with ``ok=True``), and
+one frame's refit there scatters along the shaft more than its covariance says (wander spare seed 204: a tip's own
+end cut on one frame's move of 0.9 px). So every piece's moves are also judged together (:class:`PullEvidence`):
+a piece whose moves agree over :data:`MIN_EVIDENCE_FRAMES` frames and more, :data:`MIN_MEAN_PULL_PX` on average,
+with their sum significant both under the sum of the refits' covariances and under the moves' own scatter, is
+cut; a piece at the apex only so.
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import cv2
 import numpy as np
+from scipy.stats import f as f_distribution
 
 from .attached import (
     BAND_CLEARANCE_PX,
@@ -37,13 +49,15 @@ from .attached import (
     _disc,
     _distance_to_apex,
     _particle_sized,
+    apex_pieces,
     clear_band,
     cut_off,
 )
 from .band import MIN_BAND_PIXELS, registration_band
 from .consistency import INFLUENCE_CHI2, MIN_QUADRANT_PIXELS
 
-__all__ = ["APEX_CLEARANCE_PX", "MIN_PULL_PX", "PULL_CHI2", "LoosePieces", "band_masks", "loose_pieces", "pulls"]
+__all__ = ["APEX_CLEARANCE_PX", "MIN_EVIDENCE_FRAMES", "MIN_MEAN_PULL_PX", "MIN_PULL_PX", "PULL_CHI2", "LoosePieces",
+           "Piece", "PullEvidence", "band_masks", "loose_pieces", "pulls"]
 
 #: A shaved piece this near (px) the apex is the probe's end (a thin tip's end is what every opening
 #: shaves first): never tested, never cut.
@@ -58,12 +72,39 @@ PULL_CHI2 = INFLUENCE_CHI2
 #: the band (a piece that holds a quarter of the band is the object's own).
 MIN_PIECE_BAND_PIXELS = MIN_QUADRANT_PIXELS
 MAX_PIECE_BAND_FRACTION = 0.25
+#: A thin tip's region outside the wedge of its flanks near the apex is a piece to judge from this many px²
+#: and this fraction of its enclosing circle (:func:`~semlab.tracking.attached.apex_pieces`): the part of a
+#: particle fused with the apex outside the wedge (clutter development seed 106: 8 px², 0.39) and not a
+#: sliver along a flank that the wedge's fit leaves out (the probe's own edge: substrates development seed
+#: 116, 29 px², 0.09, which, cut, took that probe 1.8 → 3.5 times the bound; a low dose's outline noise
+#: 0.09-0.14).
+MIN_APEX_PIECE_PX = 4
+MIN_APEX_PIECE_ROUNDNESS = 0.2
+#: The frames' moves of a piece are judged together (:class:`PullEvidence`) from this many frames: fewer
+#: are one frame's say...
+MIN_EVIDENCE_FRAMES = 3
+#: ... when they move the answer by this much (px) on average. Far under :data:`MIN_PULL_PX`: leaving out only a
+#: piece's part outside the wedge understates its pull, as its part inside still holds the answer (clutter
+#: spare seed 266 without noise: 0.06-0.09 px a frame, the same way every frame, with the track 0.5-1 px back;
+#: development seed 106: 0.2 px); the moves' own scatter (Hotelling's T²) keeps a refit's noise from being
+#: taken for a pull.
+MIN_MEAN_PULL_PX = 0.05
 
 
-def loose_pieces(region) -> list[np.ndarray]:
+class Piece(NamedTuple):
+    """A loose piece: its pixels (ROI-sized bool mask) and whether it lies at a thin tip's apex, outside the
+    wedge of its flanks (:func:`~semlab.tracking.attached.apex_pieces`), where only the frames' moves
+    together judge it (:class:`PullEvidence`)."""
+
+    mask: np.ndarray
+    at_apex: bool = False
+
+
+def loose_pieces(region) -> list[Piece]:
     """The pieces of ``region`` the openings of :mod:`~semlab.tracking.attached` shave off, of a
     particle's size, more than :data:`APEX_CLEARANCE_PX` from the apex: what a particle touching the
-    probe may be, whatever its shape and level (ROI-sized bool masks; they may overlap).
+    probe may be, whatever its shape and level; and, at a thin tip's apex, what lies outside the wedge of
+    its flanks (:data:`MIN_APEX_PIECE_PX`, :data:`MIN_APEX_PIECE_ROUNDNESS`). They may overlap.
 
     Parameters
     ----------
@@ -71,7 +112,8 @@ def loose_pieces(region) -> list[np.ndarray]:
         The contour template's region after the geometric cut.
     """
     region = np.asarray(region, bool)
-    to_apex = _distance_to_apex(region, _apex(region))
+    apex = _apex(region)
+    to_apex = _distance_to_apex(region, apex)
     pieces = []
     for opening in OPENINGS:
         shaved = (region & ~_body(region, opening.radius)).astype(np.uint8)
@@ -81,7 +123,10 @@ def loose_pieces(region) -> list[np.ndarray]:
                 continue
             piece = labels == i
             if to_apex is None or float(to_apex[piece].min()) > APEX_CLEARANCE_PX:
-                pieces.append(piece)
+                pieces.append(Piece(piece))
+    if apex is not None:
+        pieces += [Piece(bump, at_apex=True) for bump in apex_pieces(region, apex, min_area=MIN_APEX_PIECE_PX,
+                                                                     min_roundness=MIN_APEX_PIECE_ROUNDNESS)]
     return pieces
 
 
@@ -128,35 +173,89 @@ def pulls(shift, rest_shift, rest_covariance) -> bool:
     return chi2 > PULL_CHI2
 
 
+class PullEvidence:
+    """One piece's moves of the answer over the frames (:func:`pulls`' ``rest_shift − shift``) and the sum of the
+    refits' covariances."""
+
+    def __init__(self):
+        self.moves: list[np.ndarray] = []
+        self.covariance = np.zeros((2, 2))
+
+    @property
+    def frames(self) -> int:
+        return len(self.moves)
+
+    def add(self, move, covariance) -> None:
+        """One frame's move (px) and its refit's covariance (px²); a frame with either not finite is not counted."""
+        move, covariance = np.asarray(move, float), np.asarray(covariance, float)
+        if np.all(np.isfinite(move)) and np.all(np.isfinite(covariance)):
+            self.moves.append(move)
+            self.covariance += covariance
+
+    def pulls(self) -> bool:
+        """Whether the frames' moves say the piece pulls: at least :data:`MIN_EVIDENCE_FRAMES` of them,
+        :data:`MIN_MEAN_PULL_PX` on average, and their sum significant both under the sum of the refits'
+        covariances (χ² above :data:`PULL_CHI2`) and under the moves' own scatter (Hotelling's T², at the
+        same false-alarm rate): the refits' covariances alone understate how a refit that has lost the band
+        beside the apex scatters along the shaft."""
+        n = self.frames
+        if n < MIN_EVIDENCE_FRAMES:
+            return False
+        moves = np.array(self.moves)
+        total = moves.sum(axis=0)
+        if math.hypot(*total) <= MIN_MEAN_PULL_PX * n:
+            return False
+        try:
+            chi2 = float(total @ np.linalg.solve(self.covariance, total))
+            t2 = float(n * (total / n) @ np.linalg.solve(np.cov(moves.T), total / n))
+        except np.linalg.LinAlgError:
+            return False
+        # T² (2 dimensions, n frames) is 2 (n − 1) / (n − 2) times an F(2, n − 2) variable.
+        p_value = float(f_distribution.sf(t2 * (n - 2) / (2.0 * (n - 1)), 2, n - 2))
+        return chi2 > PULL_CHI2 and p_value < math.exp(-PULL_CHI2 / 2.0)
+
+
 class LoosePieces:
     """One track's loose pieces: those still to be judged, and those the frames cut.
 
     Parameters
     ----------
-    pending : list of (h, w) bool arrays
+    pending : list of Piece
         :func:`loose_pieces` of frame 0's region (empty: nothing to judge).
     attached : (h, w) bool array or None
         What frame 0's geometric cut took (:mod:`semlab.tracking.attached`): a re-drawn band keeps clear of it too.
     """
 
     def __init__(self, pending, attached=None):
-        self.pending = list(pending)
+        #: The pieces still judged, each with its frames' moves (:class:`PullEvidence`).
+        self.pending = [(piece, PullEvidence()) for piece in pending]
         self.attached = attached
         #: The pieces the frames cut (ROI-sized bool mask; None: none).
         self.cut = None
         self._masks = None  # (points, masks) of the band they were taken on
 
     def judged(self, points):
-        """``(piece, band mask)`` of each pending piece that can be judged on the band ``points``
+        """``(index, band mask)`` of each pending piece that can be judged on the band ``points``
         (:func:`band_masks`, computed once per band)."""
         if self._masks is None or self._masks[0] is not points:
-            self._masks = (points, band_masks(points, self.pending))
-        return [(piece, mask) for piece, mask in zip(self.pending, self._masks[1]) if mask is not None]
+            self._masks = (points, band_masks(points, [piece.mask for piece, _ in self.pending]))
+        return [(i, mask) for i, mask in enumerate(self._masks[1]) if mask is not None]
 
-    def cut_off(self, contour, piece, widths, *, choose: str = "central"):
-        """``(contour, band)``: ``contour`` without ``piece`` and the band re-drawn clear of it, of the pieces cut
-        before and of frame 0's (:func:`~semlab.tracking.attached.cut_off`, :func:`~semlab.tracking.attached.
-        clear_band`), the piece then counted cut; None (nothing recorded) when too little would remain."""
+    def pulling(self, index, shift, rest_shift, rest_covariance) -> bool:
+        """Whether pending piece ``index`` pulls the answer: leaving it out moved this frame's ``shift`` to
+        ``rest_shift`` (:func:`pulls`, with ``rest_covariance``; not for a piece at the apex, which takes the
+        band that fixes the position along the shaft with it), or the frames' moves so far say so
+        (:class:`PullEvidence`)."""
+        piece, evidence = self.pending[index]
+        evidence.add(np.asarray(rest_shift, float) - np.asarray(shift, float), rest_covariance)
+        return (not piece.at_apex and pulls(shift, rest_shift, rest_covariance)) or evidence.pulls()
+
+    def cut_off(self, contour, index, widths, *, choose: str = "central"):
+        """``(contour, band)``: ``contour`` without pending piece ``index`` and the band re-drawn clear of it, of
+        the pieces cut before and of frame 0's (:func:`~semlab.tracking.attached.cut_off`,
+        :func:`~semlab.tracking.attached.clear_band`), the piece then counted cut; None (nothing recorded) when
+        too little would remain."""
+        piece = self.pending[index][0].mask
         cut_contour = cut_off(contour, piece, choose=choose)
         if cut_contour is None:
             return None
@@ -166,7 +265,7 @@ class LoosePieces:
         if band.sum() < MIN_BAND_PIXELS:
             return None
         self.cut = cut
-        self.pending = [p for p in self.pending if p is not piece]
+        del self.pending[index]
         self._masks = None
         return cut_contour, band
 
