@@ -331,14 +331,12 @@ class ICMethod(Method):
         while the template is averaged (the first frames)."""
         if not self.pieces.pending or self.averager is None:
             return fit
-        for index, mask in self.pieces.judged(self.model.points):
-            try:
-                rest = register(arr, self.model.reweighted(~mask, self.options), Start(fit.shift, fit.gain, fit.offset),
-                                self.roi, self.options, robust_start=False)
-            except (ValueError, np.linalg.LinAlgError):
-                continue
-            if not (rest.converged and self.pieces.pulling(index, fit.shift, rest.shift, rest.covariance())):
-                continue
+
+        def without(mask):
+            return register(arr, self.model.reweighted(~mask, self.options), Start(fit.shift, fit.gain, fit.offset),
+                            self.roi, self.options, robust_start=False)
+
+        for index, rest in self.pieces.pulling_pieces(self.model.points, fit.shift, without):
             cut = self.pieces.cut_off(self.contour, index, self.widths, choose=self.options.template.choose or "central")
             if cut is None:
                 continue

@@ -206,13 +206,13 @@ class PullEvidence:
         if math.hypot(*total) <= MIN_MEAN_PULL_PX * n:
             return False
         try:
-            chi2 = float(total @ np.linalg.solve(self.covariance, total))
+            if float(total @ np.linalg.solve(self.covariance, total)) <= PULL_CHI2:
+                return False
             t2 = float(n * (total / n) @ np.linalg.solve(np.cov(moves.T), total / n))
         except np.linalg.LinAlgError:
             return False
         # T² (2 dimensions, n frames) is 2 (n − 1) / (n − 2) times an F(2, n − 2) variable.
-        p_value = float(f_distribution.sf(t2 * (n - 2) / (2.0 * (n - 1)), 2, n - 2))
-        return chi2 > PULL_CHI2 and p_value < math.exp(-PULL_CHI2 / 2.0)
+        return float(f_distribution.sf(t2 * (n - 2) / (2.0 * (n - 1)), 2, n - 2)) < math.exp(-PULL_CHI2 / 2.0)
 
 
 class LoosePieces:
@@ -240,6 +240,19 @@ class LoosePieces:
         if self._masks is None or self._masks[0] is not points:
             self._masks = (points, band_masks(points, [piece.mask for piece, _ in self.pending]))
         return [(i, mask) for i, mask in enumerate(self._masks[1]) if mask is not None]
+
+    def pulling_pieces(self, points, shift, refit_without):
+        """``(index, refit)`` of each pending piece, judged on the band ``points``, that pulls the answer ``shift``
+        (:meth:`pulling`): ``refit_without(band mask)`` registers the frame without the piece's band pixels (a
+        :class:`~semlab.tracking.registration.FitResult`; a refit that fails or does not converge judges nothing).
+        A generator: the frame's remaining pieces are judged only when the caller asks for the next."""
+        for index, mask in self.judged(points):
+            try:
+                rest = refit_without(mask)
+            except (ValueError, np.linalg.LinAlgError):
+                continue
+            if rest.converged and self.pulling(index, shift, rest.shift, rest.covariance()):
+                yield index, rest
 
     def pulling(self, index, shift, rest_shift, rest_covariance) -> bool:
         """Whether pending piece ``index`` pulls the answer: leaving it out moved this frame's ``shift`` to
