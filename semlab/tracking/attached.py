@@ -340,19 +340,21 @@ def apex_bumps(region, apex=None) -> np.ndarray:
     return cut
 
 
-def apex_pieces(region, apex=None, *, min_area: int, min_roundness: float) -> list[np.ndarray]:
-    """The pieces of ``region`` outside the wedge of a thin tip's flanks near its ``apex``
-    (:data:`BUMP_REACH_PX`), of at least ``min_area`` px² (up to :data:`MAX_PIECE_PX`, off the ROI's
-    border) that fill at least ``min_roundness`` of their enclosing circle: ROI-sized bool masks, none
-    where the region is no thin wedge or has no apex (:func:`apex_bumps` cuts those of a particle's size
-    and shape; :mod:`semlab.tracking.pieces` lets the frames judge smaller ones)."""
+def apex_pieces(region, apex=None, *, min_area: int, min_roundness: float,
+                reach: float = BUMP_REACH_PX) -> list[np.ndarray]:
+    """The pieces of ``region`` outside the wedge of a thin tip's flanks within ``reach`` px of its
+    ``apex`` (near it: :data:`BUMP_REACH_PX`), of at least ``min_area`` px² (up to :data:`MAX_PIECE_PX`,
+    off the ROI's border) that fill at least ``min_roundness`` of their enclosing circle: ROI-sized bool
+    masks, none where the region is no thin wedge or has no apex (:func:`apex_bumps` cuts those of a
+    particle's size and shape near the apex; :mod:`semlab.tracking.pieces` lets the frames judge smaller
+    ones, and those further along the flanks)."""
     region = np.asarray(region, bool)
     apex = _apex(region) if apex is None else apex
     wedge = None if apex is None else _wedge(region, apex)
     if wedge is None:
         return []
     yy, xx = np.mgrid[:region.shape[0], :region.shape[1]]
-    outside = region & ~wedge & (np.hypot(xx - apex[0], yy - apex[1]) <= BUMP_REACH_PX)
+    outside = region & ~wedge & (np.hypot(xx - apex[0], yy - apex[1]) <= reach)
     n, labels, stats, _ = cv2.connectedComponentsWithStats(outside.astype(np.uint8), connectivity=4)
     pieces = []
     for i in range(1, n):

@@ -29,7 +29,8 @@ one frame's refit there scatters along the shaft more than its covariance says (
 end cut on one frame's move of 0.9 px). So every piece's moves are also judged together (:class:`PullEvidence`):
 a piece whose moves agree over :data:`MIN_EVIDENCE_FRAMES` frames and more, :data:`MIN_MEAN_PULL_PX` on average,
 with their sum significant both under the sum of the refits' covariances and under the moves' own scatter, is
-cut; a piece at the apex only so.
+cut; a piece outside the wedge only so. Such a piece may also lie further along a flank (:data:`FLANK_REACH_PX`):
+a low, broad cap that no opening shaves.
 """
 
 from __future__ import annotations
@@ -43,6 +44,7 @@ from scipy.stats import f as f_distribution
 
 from .attached import (
     BAND_CLEARANCE_PX,
+    BUMP_REACH_PX,
     OPENINGS,
     _apex,
     _body,
@@ -56,7 +58,7 @@ from .attached import (
 from .band import MIN_BAND_PIXELS, registration_band
 from .consistency import INFLUENCE_CHI2, MIN_QUADRANT_PIXELS
 
-__all__ = ["APEX_CLEARANCE_PX", "MIN_EVIDENCE_FRAMES", "MIN_MEAN_PULL_PX", "MIN_PULL_PX", "PULL_CHI2", "PULL_T2_LEVEL",
+__all__ = ["APEX_CLEARANCE_PX", "FLANK_REACH_PX", "MIN_EVIDENCE_FRAMES", "MIN_MEAN_PULL_PX", "MIN_PULL_PX", "PULL_CHI2", "PULL_T2_LEVEL",
            "LoosePieces",
            "Piece", "PullEvidence", "band_masks", "loose_pieces", "pulls"]
 
@@ -87,6 +89,11 @@ MAX_PIECE_BAND_FRACTION = 0.25
 #: 0.09-0.14).
 MIN_APEX_PIECE_PX = 4
 MIN_APEX_PIECE_ROUNDNESS = 0.2
+#: Beyond the apex (:data:`~semlab.tracking.attached.BUMP_REACH_PX`), the wedge's flanks are followed this far
+#: (px from the apex) for such pieces too: a low, broad cap on a flank that no opening shaves, its part outside
+#: the wedge judged like an apex piece (clutter spare seed 277: 12 px² of a particle 37-51 px from the apex
+#: held the probe back by up to 1.2 px along its shaft).
+FLANK_REACH_PX = 60.0
 #: The frames' moves of a piece are judged together (:class:`PullEvidence`) from this many frames: fewer
 #: are one frame's say...
 MIN_EVIDENCE_FRAMES = 3
@@ -99,19 +106,20 @@ MIN_MEAN_PULL_PX = 0.05
 
 
 class Piece(NamedTuple):
-    """A loose piece: its pixels (ROI-sized bool mask) and whether it lies at a thin tip's apex, outside the
-    wedge of its flanks (:func:`~semlab.tracking.attached.apex_pieces`), where only the frames' moves
-    together judge it (:class:`PullEvidence`)."""
+    """A loose piece: its pixels (ROI-sized bool mask) and whether it is the part of a thin tip's region
+    outside the wedge of its flanks (:func:`~semlab.tracking.attached.apex_pieces`, at the apex or along a
+    flank), which only the frames' moves together judge (:class:`PullEvidence`)."""
 
     mask: np.ndarray
-    at_apex: bool = False
+    outside_wedge: bool = False
 
 
 def loose_pieces(region) -> list[Piece]:
     """The pieces of ``region`` the openings of :mod:`~semlab.tracking.attached` shave off, of a
     particle's size, more than :data:`APEX_CLEARANCE_PX` from the apex: what a particle touching the
-    probe may be, whatever its shape and level; and, at a thin tip's apex, what lies outside the wedge of
-    its flanks (:data:`MIN_APEX_PIECE_PX`, :data:`MIN_APEX_PIECE_ROUNDNESS`). They may overlap.
+    probe may be, whatever its shape and level; and, of a thin tip, what lies outside the wedge of its
+    flanks (:data:`MIN_APEX_PIECE_PX`, :data:`MIN_APEX_PIECE_ROUNDNESS`) at its apex and along its flanks
+    (:data:`FLANK_REACH_PX`). They may overlap.
 
     Parameters
     ----------
@@ -132,8 +140,13 @@ def loose_pieces(region) -> list[Piece]:
             if to_apex is None or float(to_apex[piece].min()) > APEX_CLEARANCE_PX:
                 pieces.append(Piece(piece))
     if apex is not None:
-        pieces += [Piece(bump, at_apex=True) for bump in apex_pieces(region, apex, min_area=MIN_APEX_PIECE_PX,
-                                                                     min_roundness=MIN_APEX_PIECE_ROUNDNESS)]
+        outside = dict(min_area=MIN_APEX_PIECE_PX, min_roundness=MIN_APEX_PIECE_ROUNDNESS)
+        pieces += [Piece(bump, outside_wedge=True) for bump in apex_pieces(region, apex, **outside)]
+        yy, xx = np.mgrid[:region.shape[0], :region.shape[1]]
+        from_apex = np.hypot(xx - apex[0], yy - apex[1])
+        along_flanks = apex_pieces(region, apex, **outside, reach=FLANK_REACH_PX)
+        pieces += [Piece(bump, outside_wedge=True) for bump in along_flanks
+                   if float(from_apex[bump].min()) > BUMP_REACH_PX]  # those nearer are the apex's
     return pieces
 
 
@@ -263,12 +276,12 @@ class LoosePieces:
 
     def pulling(self, index, shift, rest_shift, rest_covariance) -> bool:
         """Whether pending piece ``index`` pulls the answer: leaving it out moved this frame's ``shift`` to
-        ``rest_shift`` (:func:`pulls`, with ``rest_covariance``; not for a piece at the apex, which takes the
-        band that fixes the position along the shaft with it), or the frames' moves so far say so
+        ``rest_shift`` (:func:`pulls`, with ``rest_covariance``; not for a piece outside the wedge: at the apex
+        it takes the band that fixes the position along the shaft with it), or the frames' moves so far say so
         (:class:`PullEvidence`)."""
         piece, evidence = self.pending[index]
         evidence.add(np.asarray(rest_shift, float) - np.asarray(shift, float), rest_covariance)
-        return (not piece.at_apex and pulls(shift, rest_shift, rest_covariance)) or evidence.pulls()
+        return (not piece.outside_wedge and pulls(shift, rest_shift, rest_covariance)) or evidence.pulls()
 
     def cut_off(self, contour, index, widths, *, choose: str = "central"):
         """``(contour, band)``: ``contour`` without pending piece ``index`` and the band re-drawn clear of it, of
