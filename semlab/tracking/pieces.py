@@ -140,7 +140,7 @@ def loose_pieces(region) -> list[Piece]:
             if to_apex is None or float(to_apex[piece].min()) > APEX_CLEARANCE_PX:
                 pieces.append(Piece(piece))
     if apex is not None:
-        outside = dict(min_area=MIN_APEX_PIECE_PX, min_roundness=MIN_APEX_PIECE_ROUNDNESS)
+        outside = {"min_area": MIN_APEX_PIECE_PX, "min_roundness": MIN_APEX_PIECE_ROUNDNESS}
         pieces += [Piece(bump, outside_wedge=True) for bump in apex_pieces(region, apex, **outside)]
         yy, xx = np.mgrid[:region.shape[0], :region.shape[1]]
         from_apex = np.hypot(xx - apex[0], yy - apex[1])
