@@ -58,9 +58,8 @@ from .attached import (
 from .band import MIN_BAND_PIXELS, registration_band
 from .consistency import INFLUENCE_CHI2, MIN_QUADRANT_PIXELS
 
-__all__ = ["APEX_CLEARANCE_PX", "FLANK_REACH_PX", "MIN_EVIDENCE_FRAMES", "MIN_MEAN_PULL_PX", "MIN_PULL_PX", "PULL_CHI2", "PULL_T2_LEVEL",
-           "LoosePieces",
-           "Piece", "PullEvidence", "band_masks", "loose_pieces", "pulls"]
+__all__ = ["APEX_CLEARANCE_PX", "FLANK_REACH_PX", "MIN_EVIDENCE_FRAMES", "MIN_MEAN_PULL_PX", "MIN_PULL_PX", "PULL_CHI2",
+           "PULL_T2_LEVEL", "LoosePieces", "Piece", "PullEvidence", "band_masks", "loose_pieces", "pulls"]
 
 #: A shaved piece this near (px) the apex is the probe's end (a thin tip's end is what every opening
 #: shaves first): never tested, never cut.
@@ -140,11 +139,11 @@ def loose_pieces(region) -> list[Piece]:
             if to_apex is None or float(to_apex[piece].min()) > APEX_CLEARANCE_PX:
                 pieces.append(Piece(piece))
     if apex is not None:
-        outside = {"min_area": MIN_APEX_PIECE_PX, "min_roundness": MIN_APEX_PIECE_ROUNDNESS}
-        pieces += [Piece(bump, outside_wedge=True) for bump in apex_pieces(region, apex, **outside)]
+        sized = {"min_area": MIN_APEX_PIECE_PX, "min_roundness": MIN_APEX_PIECE_ROUNDNESS}
+        pieces += [Piece(bump, outside_wedge=True) for bump in apex_pieces(region, apex, **sized)]
         yy, xx = np.mgrid[:region.shape[0], :region.shape[1]]
         from_apex = np.hypot(xx - apex[0], yy - apex[1])
-        along_flanks = apex_pieces(region, apex, **outside, reach=FLANK_REACH_PX)
+        along_flanks = apex_pieces(region, apex, **sized, reach=FLANK_REACH_PX)
         pieces += [Piece(bump, outside_wedge=True) for bump in along_flanks
                    if float(from_apex[bump].min()) > BUMP_REACH_PX]  # those nearer are the apex's
     return pieces
