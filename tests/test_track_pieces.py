@@ -9,6 +9,8 @@ import math
 import numpy as np
 import pandas as pd
 import pytest
+from hypothesis import example, given, settings
+from hypothesis import strategies as st
 from test_track_attached import (
     PARTICLE_AT,
     PARTICLE_RADIUS,
@@ -110,6 +112,30 @@ def test_the_frames_moves_of_a_piece_judged_together():
     evidence, _ = _evidence(0.2, 0.05, 3)
     evidence.add((np.nan, 0.0), np.eye(2))
     assert evidence.frames == 3
+
+
+@settings(max_examples=40, deadline=None)
+@given(angle=st.floats(0.0, 2.0 * math.pi), seed=st.integers(0, 2**16), mean=st.floats(0.0, 0.3),
+       scatter=st.floats(0.02, 0.5))
+@example(angle=math.pi / 2, seed=0, mean=0.25, scatter=0.05)  # a pull along x, turned onto y
+def test_the_evidence_does_not_depend_on_the_axes(angle, seed, mean, scatter):
+    # chi2 under the summed covariances, Hotelling's T² and the mean's length are invariant under a rotation of
+    # the image axes: the same moves and covariances turned by any angle get the same verdict on every frame.
+    rng = np.random.default_rng(seed)
+    turn = np.array([[math.cos(angle), -math.sin(angle)], [math.sin(angle), math.cos(angle)]])
+    plain, turned = PullEvidence(), PullEvidence()
+    for _ in range(12):
+        move = np.array([mean + scatter * rng.standard_normal(), scatter * rng.standard_normal()])
+        a = rng.standard_normal((2, 2))
+        covariance = 0.01 * (a @ a.T + np.eye(2))
+        plain.add(move, covariance)
+        turned.add(turn @ move, turn @ covariance @ turn.T)
+        total = np.sum(plain.moves, axis=0)
+        margin = abs(math.hypot(*total) - MIN_MEAN_PULL_PX * plain.frames)
+        if margin > 1e-9:  # (exactly at the floor, rounding may decide either way)
+            assert plain.pulls() == turned.pulls()
+    if mean == 0.25 and scatter == 0.05:
+        assert plain.pulls()  # the explicit example is a pull
 
 
 def test_a_piece_at_the_apex_is_never_cut_on_one_frames_say():
