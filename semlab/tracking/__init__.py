@@ -61,8 +61,12 @@ Modules
     Each frame's ``sigma_x``, ``sigma_y`` and the tests behind the flags; whether the band's quadrants agree.
 ``trust``
     :class:`~semlab.tracking.trust.Judge`: whether a followed answer may be reported, or why not.
+``lifecycle``
+    The ``"ic"`` template through its life: built, averaged, flattened, its loose pieces cut.
+``pieces``
+    Pieces of frame 0's object that do not move with it, judged by the frames and cut.
 ``ic``, ``paper``
-    One object per algorithm: ``"ic"``; ``"contour"``, ``"ssd"``, ``"hb"``.
+    One object per algorithm: ``"ic"`` (its per-frame steps over the lifecycle); ``"contour"``, ``"ssd"``, ``"hb"``.
 ``stepper``
     :class:`~semlab.tracking.stepper.Stepper`: one frame through predicted → (followed) → searched →
     re-acquired → verdict, judged and reported.
