@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import types
 
 import numpy as np
 import pandas as pd
@@ -282,6 +283,59 @@ def test_evaluate_with_factories_inline_and_per_frame():
     s = summarise(df)
     assert s[["family", "tracker"]].values.tolist() == [["still", "still"], ["still", "ncc"]]
     assert "| still | ncc |" in summary_markdown(s)
+
+
+#: The per-frame columns checks we cannot see rely on, in this order; ``reason`` comes after them.
+PER_FRAME_CONTRACT = ["family", "seed", "tracker", "frame", "ex", "ey", "ok", "sigma_x", "sigma_y", "visible"]
+
+
+class _Says:
+    """Frame k's answer from a script: flagged with a reason, ok with a stray reason, flagged with None
+    or with no ``reason`` attribute at all (a peer that only has x, y, score, ok)."""
+
+    SCRIPT = (("ok", "ignored at frame 0"), ("flagged", "too dark"), ("ok", "a stray reason"), ("flagged", None),
+              ("bare", None))
+
+    def init(self, frame, roi):
+        self.k = 0
+        return self._answer()
+
+    def update(self, frame):
+        self.k += 1
+        return self._answer()
+
+    def _answer(self):
+        kind, why = self.SCRIPT[self.k]
+        if kind == "bare":
+            return types.SimpleNamespace(x=1.0, y=1.0, score=0.0, ok=False)
+        return TrackResult(1.0, 1.0, 1.0, kind == "ok", why)
+
+
+def test_run_tracker_keeps_why_each_frame_was_flagged():
+    frames = np.zeros((5, 32, 32), np.uint8)
+    track, _, error = run_tracker(_Says, frames, (0, 0, 16, 16))
+    assert error == "" and track["reason"].tolist() == ["", "too dark", "", "", ""]
+    track, _, error = run_tracker(_Refuses, frames, (0, 0, 16, 16))
+    assert track["reason"].tolist() == [error] * 5 and "ValueError: nothing here" in error
+    track, _, _ = run_tracker(_Crashes, frames, (0, 0, 16, 16))
+    assert track["reason"].tolist() == ["", *["RuntimeError: boom"] * 4]
+
+
+def test_the_per_frame_table_says_why_each_frame_was_flagged():
+    # low dose: semlab flags every frame after frame 0 (too uncertain), one seed of 40 frames
+    df, frames = semlab.evaluate(families="low_dose", seeds=[0], trackers={"semlab": None, "ncc": None,
+                                                                          "refuses": _Refuses},
+                                 scheduler="inline", per_frame=True, progress=False)
+    assert list(frames.columns) == PER_FRAME_COLUMNS == [*PER_FRAME_CONTRACT, "reason"]
+    assert frames["reason"].map(type).eq(str).all() and frames["tracker"].unique().tolist() == list(df["tracker"])
+    started = frames[frames["tracker"] != "refuses"]
+    later = started[started["frame"] != 0]
+    ours = later[later["tracker"] == "semlab"]
+    assert (~ours["ok"]).sum() > 0 and (ours.loc[~ours["ok"], "reason"] != "").all()
+    assert (later.loc[later["ok"], "reason"] == "").all() and (started.loc[started["frame"] == 0, "reason"] == "").all()
+    refused = frames[frames["tracker"] == "refuses"]
+    assert len(refused) == 40 and refused["reason"].eq(df.set_index("tracker").loc["refuses", "error"]).all()
+    assert refused["reason"].str.contains("ValueError: nothing here").all()
 
 
 def test_summary_order_statistics_and_a_never_found_probe():

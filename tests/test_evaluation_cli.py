@@ -15,7 +15,7 @@ import pandas as pd
 import pytest
 
 from semlab import cli
-from semlab.evaluation import COLUMNS, evaluate
+from semlab.evaluation import COLUMNS, PER_FRAME_COLUMNS, evaluate
 
 BIN = Path(sys.executable).parent
 
@@ -71,6 +71,19 @@ def test_without_takes_the_part_out_and_says_so(tmp_path, capsys):
     # a part the family cannot take out (its substrate is not the simulator's clutter): refused before any work
     code, _, err = _run(["--families", "still,substrates", "--without", "texture", "--out", str(out)], capsys)
     assert code == cli.EXIT_USAGE and "'substrates' cannot take out ['texture']" in err
+
+
+def test_the_per_frame_csv_says_why_each_frame_was_flagged(tmp_path, capsys):
+    # low dose: semlab flags every frame after frame 0; the result CSV keeps its columns
+    out, frames_csv = tmp_path / "r.csv", tmp_path / "p.csv"
+    code, _, _ = _run(["--families", "low_dose", "--seeds", "0", "--trackers", "semlab,ncc", "--scheduler", "inline",
+                       "--out", str(out), "--per-frame", str(frames_csv), "--no-progress"], capsys)
+    assert code == 0 and list(pd.read_csv(out).columns) == COLUMNS
+    frames = pd.read_csv(frames_csv, keep_default_na=False)
+    assert list(frames.columns) == PER_FRAME_COLUMNS and PER_FRAME_COLUMNS[-1] == "reason"
+    ok = frames["ok"].astype(str) == "True"
+    flagged = frames[~ok & (frames["frame"] != 0)]
+    assert len(flagged) > 0 and (flagged["reason"] != "").all() and (frames.loc[ok, "reason"] == "").all()
 
 
 @pytest.mark.parametrize("args", [["--seeds", "5-2"], ["--param", "huber=-1"], ["--trackers", "ncc", "--param", "huber=3"],

@@ -223,7 +223,9 @@ def evaluate(families=None, seeds=None, trackers=None, *, split: str | None = No
         ms_per_frame`` and more (:mod:`semlab.evaluation.scoring` defines them), ordered by
         family, seed and tracker as given. ``df.attrs["sequences"]`` holds each sequence's drawn
         parameters and bound, ``df.attrs["scheduler"]`` where it ran. The per-frame table has
-        ``family, seed, tracker, frame, ex, ey, ok, sigma_x, sigma_y, visible``.
+        ``family, seed, tracker, frame, ex, ey, ok, sigma_x, sigma_y, visible, reason``
+        (:data:`semlab.evaluation.PER_FRAME_COLUMNS`; ``reason``: why the frame was flagged, ''
+        when it is ok).
 
     Raises
     ------

@@ -25,6 +25,10 @@ origin of both the track and the truth and is left out of every statistic):
   1: held where it started, by something that does not move with the probe), apart from a constant
   ``b``; NaN when the probe moved less than :data:`HELD_MIN_MOTION_PX` (rms about its mean) or the
   truth is not known.
+
+The per-frame table (:data:`PER_FRAME_COLUMNS`) ends with each frame's ``reason``: why it was flagged
+(the tracker's ``TrackResult.reason``; a refused start's or a crashed ``update``'s message), '' for an
+ok frame, for frame 0 and for a tracker that says nothing.
 """
 
 from __future__ import annotations
@@ -55,7 +59,11 @@ COLUMNS = ["family", "seed", "split", "tracker", "rmse_px", "crb_px", "lost_frac
            "ms_per_frame", "n_frames", "rmse_over_crb", "std_px", "std_over_crb", "median_err_px",
            "p90_err_px", "max_err_px", "flagged_fraction", "coverage95", "crb_x_px", "crb_y_px",
            "n_visible", "bias_px", "held_fraction", "error"]
-PER_FRAME_COLUMNS = ["family", "seed", "tracker", "frame", "ex", "ey", "ok", "sigma_x", "sigma_y", "visible"]
+#: The per-frame columns, the contract first; ``reason`` last (see the module docstring).
+PER_FRAME_COLUMNS = ["family", "seed", "tracker", "frame", "ex", "ey", "ok", "sigma_x", "sigma_y", "visible",
+                     "reason"]
+#: :func:`run_tracker`'s track.
+_TRACK_COLUMNS = ["frame", "x", "y", "ok", "sigma_x", "sigma_y", "reason"]
 
 
 def _sigma(result, name: str) -> float:
@@ -66,17 +74,27 @@ def _sigma(result, name: str) -> float:
         return float("nan")
 
 
+def _reason(result) -> str:
+    """Why ``result`` is flagged: its ``reason`` ('' when it is ok or gives none)."""
+    if bool(result.ok):
+        return ""
+    v = getattr(result, "reason", "")
+    return "" if v is None else str(v)
+
+
 def run_tracker(factory, frames, roi) -> tuple[pd.DataFrame, float, str]:
     """Run a fresh tracker from ``factory`` over ``frames`` from ``roi``.
 
     Returns
     -------
     (track, ms_per_frame, error)
-        ``track``: ``frame, x, y, ok, sigma_x, sigma_y``; the mean ``update`` time in ms; and
-        '' or why the run was cut short. A tracker that refuses to start (``init`` raises
-        ``ValueError``/``TypeError``) gives every frame ``ok=False``; one that raises in
-        ``update`` gets that frame ``ok=False`` and the message is kept (a crash is a bug in the
-        tracker, and the corpus reports it rather than dying on it).
+        ``track``: ``frame, x, y, ok, sigma_x, sigma_y, reason`` (``reason``: why the frame is
+        flagged, '' for an ok frame and frame 0); the mean ``update`` time in ms; and '' or why the
+        run was cut short. A tracker that refuses to start (``init`` raises
+        ``ValueError``/``TypeError``) gives every frame ``ok=False`` with the refusal as its reason;
+        one that raises in ``update`` gets that frame ``ok=False`` with the exception as its reason,
+        and the first such message is kept (a crash is a bug in the tracker, and the corpus reports
+        it rather than dying on it).
     """
     nan = float("nan")
     n = len(frames)
@@ -87,9 +105,11 @@ def run_tracker(factory, frames, roi) -> tuple[pd.DataFrame, float, str]:
         first = tracker.init(frames[0], roi)
     except (ValueError, TypeError) as e:
         error = f"init refused: {type(e).__name__}: {e}"
-        rows = [(k, nan, nan, False, nan, nan) for k in range(n)]
-        return pd.DataFrame(rows, columns=["frame", "x", "y", "ok", "sigma_x", "sigma_y"]), nan, error
-    rows.append((0, float(first.x), float(first.y), bool(first.ok), _sigma(first, "sigma_x"), _sigma(first, "sigma_y")))
+        rows = [(k, nan, nan, False, nan, nan, error) for k in range(n)]
+        return pd.DataFrame(rows, columns=_TRACK_COLUMNS), nan, error
+    # frame 0 is the origin: nothing to flag
+    rows.append((0, float(first.x), float(first.y), bool(first.ok), _sigma(first, "sigma_x"), _sigma(first, "sigma_y"),
+                 ""))
     elapsed = 0.0
     for k in range(1, n):
         t0 = time.perf_counter()
@@ -97,24 +117,27 @@ def run_tracker(factory, frames, roi) -> tuple[pd.DataFrame, float, str]:
             r = tracker.update(frames[k])
         except Exception as e:  # noqa: BLE001 - reported in the row, see the docstring
             elapsed += time.perf_counter() - t0
+            crash = f"{type(e).__name__}: {e}"
             if not error:
-                error = f"update raised at frame {k}: {type(e).__name__}: {e}"
-            rows.append((k, nan, nan, False, nan, nan))
+                error = f"update raised at frame {k}: {crash}"
+            rows.append((k, nan, nan, False, nan, nan, crash))
             continue
         elapsed += time.perf_counter() - t0
-        rows.append((k, float(r.x), float(r.y), bool(r.ok), _sigma(r, "sigma_x"), _sigma(r, "sigma_y")))
+        rows.append((k, float(r.x), float(r.y), bool(r.ok), _sigma(r, "sigma_x"), _sigma(r, "sigma_y"), _reason(r)))
     ms = elapsed * 1e3 / max(n - 1, 1)
-    return pd.DataFrame(rows, columns=["frame", "x", "y", "ok", "sigma_x", "sigma_y"]), ms, error
+    return pd.DataFrame(rows, columns=_TRACK_COLUMNS), ms, error
 
 
 def frame_errors(track: pd.DataFrame, truth: pd.DataFrame, roi) -> pd.DataFrame:
-    """``frame, ex, ey, ok, sigma_x, sigma_y, visible, true_dx, true_dy`` of one run
-    (:func:`semlab.metrics.tracking_errors`; ``true_dx, true_dy``: the truth's displacement from frame 0)."""
+    """``frame, ex, ey, ok, sigma_x, sigma_y, visible, reason, true_dx, true_dy`` of one run
+    (:func:`semlab.metrics.tracking_errors`; ``reason``: the track's, '' where it has none; ``true_dx,
+    true_dy``: the truth's displacement from frame 0)."""
     e = tracking_errors(track[["frame", "x", "y", "ok"]], truth, roi)
     out = e[["frame", "ex", "ey", "ok"]].copy()
     out["sigma_x"] = track["sigma_x"].to_numpy(float)
     out["sigma_y"] = track["sigma_y"].to_numpy(float)
     out["visible"] = e["visible"].to_numpy(bool)
+    out["reason"] = track["reason"].fillna("").astype(str).to_numpy() if "reason" in track else ""
     true = truth.set_index("frame").loc[out["frame"], ["x", "y"]].to_numpy(float)
     first = truth.set_index("frame").loc[0, ["x", "y"]].to_numpy(float)
     out["true_dx"], out["true_dy"] = true[:, 0] - first[0], true[:, 1] - first[1]
