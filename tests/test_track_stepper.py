@@ -130,3 +130,28 @@ def test_a_moved_origin_moves_the_motion_not_the_position():
     assert (r.x, r.y) == pytest.approx((CENTRE0[0] + 2.0, CENTRE0[1]))
     np.testing.assert_allclose(s.motion.shift, [2.5, 0.0])
     assert (CENTRE0[0] + s.motion.shift[0] - method.origin[0]) == pytest.approx(r.x)
+
+
+def test_answers_that_follow_an_ambiguous_jump_stay_flagged_until_the_track_comes_back():
+    class Scored(Scripted):
+        """Followed answers match at 0.9, searched ones at 0.7: under the track's typical 0.8."""
+
+        def typical_score(self):
+            return 0.8
+
+        def verdict(self, arr, found, predicted):
+            return Verdict.accept(found, 0.9 if found is self.followed else 0.7)
+
+    method = Scored(followed=np.array([1.0, 0.0]))
+    s = Stepper(method, Judge(LossOptions(max_poor_jump=3.0), contrast_noise=30.0, method=method), ROI, 300,
+                3.0, CENTRE0)
+    assert s.step(FRAME).ok
+    method.followed = None  # the follow fails; the search finds something 10 px off, at a poor match
+    method.searched = np.array([11.0, 0.0])
+    assert s.step(FRAME).reason.startswith("ambiguous")
+    method.followed, method.searched = np.array([11.5, 0.0]), None  # followed from there: it matches well
+    r = s.step(FRAME)
+    assert not r.ok and r.reason.startswith("in doubt")
+    np.testing.assert_allclose(s.motion.shift, [11.5, 0.0])  # followed all the same
+    method.followed = np.array([2.0, 0.0])  # the object again, 1 px from where the track was last trusted
+    assert s.step(FRAME).ok

@@ -16,7 +16,7 @@ from semlab.evaluation.scoring import frame_errors
 from semlab.tracking import METHODS, Tracker, ic, track, uncertainty
 from semlab.tracking.ic import ICMethod
 from semlab.tracking.options import LossOptions
-from semlab.tracking.trust import Judge
+from semlab.tracking.trust import DOUBT_FRAMES, Judge
 from semlab.tracking.uncertainty import (
     AMBIGUOUS_JUMP_PX,
     MAX_TEXTURED_SCORE_DROP,
@@ -320,18 +320,22 @@ def _results(frames, roi, **options):
 
 def test_a_jump_to_a_poor_match_is_flagged_and_followed(monkeypatch):
     # A wedge drifting 0.3 px a frame, then jumping 12 px: with a typical score no match reaches, the
-    # jump's frame alone is flagged "ambiguous" (the steady frames stay within a pixel of their
-    # prediction, the frame after the jump within one of the jump's position), and the tracker follows it
-    # exactly as without the check. With the track's own typical score the jump's match vouches for it.
+    # jump's frame is flagged "ambiguous" (the steady frames stay within a pixel of their prediction, the
+    # frames after the jump within one of the jump's position), the next DOUBT_FRAMES frames, 12 px from
+    # where the track was last trusted, "in doubt", the one after trusted again; and the tracker follows
+    # them exactly as without the check. With the track's own typical score the jump's match vouches for it.
     frames = [wedge_frame(0.3 * k, 0.1 * k, noise=4.0, seed=k) for k in range(8)]
-    frames += [wedge_frame(12.0 + 0.3 * k, 6.0, noise=4.0, seed=50 + k) for k in range(3)]
+    frames += [wedge_frame(12.0 + 0.3 * k, 6.0, noise=4.0, seed=50 + k) for k in range(DOUBT_FRAMES + 2)]
     assert all(r.ok for r in _results(frames, ROI))
     monkeypatch.setattr(ICMethod, "typical_score", lambda self: 1.01)
     judged, free = _results(frames, ROI), _results(frames, ROI, max_poor_jump=None)
     assert all(r.ok for r in free)
-    assert [k for k, r in enumerate(judged, 1) if not r.ok] == [8]
+    flagged = [k for k, r in enumerate(judged, 1) if not r.ok]
+    assert flagged == list(range(8, 8 + DOUBT_FRAMES + 1))
     assert judged[7].reason.startswith("ambiguous") and math.isnan(judged[7].x)
-    assert [(r.x, r.y) for r in judged[8:]] == [(r.x, r.y) for r in free[8:]]
+    assert all(judged[k - 1].reason.startswith("in doubt") for k in flagged[1:])
+    assert judged[-1].ok and (judged[-1].x, judged[-1].y) == (free[-1].x, free[-1].y)
+    assert [(r.x, r.y) for r in judged[8 + DOUBT_FRAMES:]] == [(r.x, r.y) for r in free[8 + DOUBT_FRAMES:]]
 
 
 @pytest.mark.slow
@@ -340,13 +344,16 @@ def test_a_whole_frame_match_along_the_shaft_under_an_occluder_is_flagged():
     # 22-31; in frame 28 the registration from the prediction fails, and the whole frame's best match
     # is the shaft 36 px along its axis, scoring 0.74 against the track's typical 0.82, reported ok
     # without the check. With it that frame is flagged, and so is the next, back on the hidden tip 35 px
-    # away at 0.76 (after a jump no move is expected); every other frame is as before.
+    # away at 0.76 (after a jump no move is expected); the two after that, still more than 3 px from where
+    # the track was last trusted, are "in doubt" (semlab.tracking.trust.JumpDoubt); every other frame is
+    # as before.
     seq = make_family_sequence("clutter", 231)
     free = frame_errors(track(seq.frames, seq.roi, max_poor_jump=None), seq.truth, seq.roi)
     judged = _results(seq.frames, seq.roi)
     assert free.loc[28, "ok"] and np.hypot(free.loc[28, "ex"], free.loc[28, "ey"]) > 30
     assert all(not r.ok and r.reason.startswith("ambiguous") for r in judged[27:29])
-    assert [r.ok for r in judged[:27] + judged[29:]] == list(free["ok"].iloc[1:].drop([28, 29]))
+    assert all(not r.ok and r.reason.startswith("in doubt") for r in judged[29:31])
+    assert [r.ok for r in judged[:27] + judged[31:]] == list(free["ok"].iloc[1:].drop([28, 29, 30, 31]))
 
 
 def test_a_young_template_inflates_the_reported_sigma_only(monkeypatch):

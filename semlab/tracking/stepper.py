@@ -16,7 +16,7 @@ import numpy as np
 from .method import Method, Motion, Verdict
 from .result import TrackResult
 from .search import search_window
-from .trust import Judge
+from .trust import Judge, JumpDoubt
 
 __all__ = ["Stepper"]
 
@@ -45,6 +45,8 @@ class Stepper:
         self.search_size, self.max_poor_jump = search_size, max_poor_jump
         self.centre0 = np.asarray(centre0, float)
         self.motion = Motion()
+        #: The doubt an ambiguous jump leaves on the frames that follow it (None: the loss option is off).
+        self.doubt = JumpDoubt(max_poor_jump) if max_poor_jump is not None and method.flags_uncertain else None
 
     def step(self, arr) -> TrackResult:
         """The answer in ``arr`` (a checked frame on the tracker's gray scale): predicted → (followed) →
@@ -109,9 +111,9 @@ class Stepper:
         moved = self.method.after_accept(arr, verdict)
         if moved is not None:  # the template's origin moved: the state follows (the position stays)
             motion.shift = motion.shift + moved
-        reason = (self.judge.distrust(uncertainty)
-                  or self.judge.doubt_jump(jump, expected, verdict.score, drifted=verdict.drifted)
-                  or self.judge.doubt_match(verdict.score))
+        ambiguous = self.judge.doubt_jump(jump, expected, verdict.score, drifted=verdict.drifted)
+        reason = self.judge.distrust(uncertainty) or ambiguous or self.judge.doubt_match(verdict.score)
+        reason = self._doubted(verdict.shift, ambiguous, reason, expected)
         if reason is not None:
             # Followed (the motion moves on, the next frame starts from here; a frame that
             # registered well still improves the template) but not trusted: a flag is better than
@@ -121,6 +123,22 @@ class Stepper:
             return result
         sx, sy = uncertainty.sigma
         return dataclasses.replace(result, sigma_x=float(sx), sigma_y=float(sy))
+
+    def _doubted(self, shift, ambiguous, reason, speed):
+        """``reason``, or why the answer at ``shift`` is in doubt after an ambiguous jump
+        (:class:`~semlab.tracking.trust.JumpDoubt`); a trusted answer (``speed``: the move the track
+        expected) becomes the place the doubt measures from."""
+        doubt = self.doubt
+        if doubt is None:
+            return reason
+        if ambiguous is not None:
+            doubt.start()
+            return reason
+        doubted = doubt.judge(shift)
+        reason = reason or doubted
+        if reason is None:
+            doubt.trust(shift, speed)
+        return reason
 
     def _accept(self, shift, score) -> TrackResult:
         """The motion moved on to ``shift``; the answer it makes, unjudged."""
