@@ -46,7 +46,8 @@ class Stepper:
         self.centre0 = np.asarray(centre0, float)
         self.motion = Motion()
         #: The doubt an ambiguous jump leaves on the frames that follow it (None: the loss option is off).
-        self.doubt = JumpDoubt(max_poor_jump) if max_poor_jump is not None and method.flags_uncertain else None
+        self.doubt = (JumpDoubt(max_poor_jump, self.centre0) if max_poor_jump is not None and method.flags_uncertain
+                      else None)
 
     def step(self, arr) -> TrackResult:
         """The answer in ``arr`` (a checked frame on the tracker's gray scale): predicted → (followed) →
@@ -113,7 +114,7 @@ class Stepper:
             motion.shift = motion.shift + moved
         ambiguous = self.judge.doubt_jump(jump, expected, verdict.score, drifted=verdict.drifted)
         reason = self.judge.distrust(uncertainty) or ambiguous or self.judge.doubt_match(verdict.score)
-        reason = self._doubted(verdict.shift, ambiguous, reason, expected)
+        reason = self._doubted((result.x, result.y), ambiguous, reason, expected)
         if reason is not None:
             # Followed (the motion moves on, the next frame starts from here; a frame that
             # registered well still improves the template) but not trusted: a flag is better than
@@ -124,20 +125,20 @@ class Stepper:
         sx, sy = uncertainty.sigma
         return dataclasses.replace(result, sigma_x=float(sx), sigma_y=float(sy))
 
-    def _doubted(self, shift, ambiguous, reason, speed):
-        """``reason``, or why the answer at ``shift`` is in doubt after an ambiguous jump
-        (:class:`~semlab.tracking.trust.JumpDoubt`); a trusted answer (``speed``: the move the track
-        expected) becomes the place the doubt measures from."""
+    def _doubted(self, position, ambiguous, reason, speed):
+        """``reason``, or why the answer at ``position`` (px in the frame: a template refreshed since does
+        not move it) is in doubt after an ambiguous jump (:class:`~semlab.tracking.trust.JumpDoubt`); a
+        trusted answer (``speed``: the move the track expected) becomes the place the doubt measures from."""
         doubt = self.doubt
         if doubt is None:
             return reason
         if ambiguous is not None:
             doubt.start()
             return reason
-        doubted = doubt.judge(shift)
+        doubted = doubt.judge(position)
         reason = reason or doubted
         if reason is None:
-            doubt.trust(shift, speed)
+            doubt.trust(position, speed)
         return reason
 
     def _accept(self, shift, score) -> TrackResult:

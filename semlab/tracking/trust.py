@@ -125,21 +125,25 @@ class JumpDoubt:
     within reach of where the track was last trusted (``limit`` px, or its speed then if larger: one
     frame's expected move), or for :data:`DOUBT_FRAMES` followed frames.
 
+    Places are positions in the frame (px).
+
     Parameters
     ----------
     limit : float
         The reach (px) around the last trusted place: the loss option ``max_poor_jump``.
+    start : (2,) array_like
+        Frame 0's position: trusted by definition.
     """
 
-    def __init__(self, limit: float):
+    def __init__(self, limit: float, start=(0.0, 0.0)):
         self.limit = float(limit)
         self.anchor: np.ndarray | None = None
-        self.trusted, self.speed = np.zeros(2), 0.0
+        self.trusted, self.speed = np.array(start, float), 0.0
         self.frames = 0
 
-    def trust(self, shift, speed: float) -> None:
-        """The track was trusted at ``shift`` (px), moving ``speed`` px a frame."""
-        self.trusted, self.speed = np.array(shift, float), float(speed)
+    def trust(self, position, speed: float) -> None:
+        """The track was trusted at ``position``, moving ``speed`` px a frame."""
+        self.trusted, self.speed = np.array(position, float), float(speed)
 
     def start(self) -> None:
         """An ambiguous jump: the doubt starts (again) from the last trusted place."""
@@ -147,12 +151,12 @@ class JumpDoubt:
             self.anchor = self.trusted.copy()
         self.frames = 0
 
-    def judge(self, shift) -> str | None:
-        """Why a followed answer at ``shift`` is in doubt, or None (no doubt, or it is over)."""
+    def judge(self, position) -> str | None:
+        """Why a followed answer at ``position`` is in doubt, or None (no doubt, or it is over)."""
         if self.anchor is None:
             return None
         self.frames += 1
-        off = float(np.hypot(*(np.asarray(shift, float) - self.anchor)))
+        off = float(np.hypot(*(np.asarray(position, float) - self.anchor)))
         reach = max(self.limit, self.speed)
         if off <= reach or self.frames > DOUBT_FRAMES:
             self.anchor = None
