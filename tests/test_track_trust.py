@@ -131,3 +131,20 @@ def test_a_track_that_jumped_to_something_else_while_the_tip_was_hidden_is_not_r
     assert results[26].reason.startswith("ambiguous")
     assert [results[k].reason.split(":")[0] for k in (27, 28)] == ["in doubt", "in doubt"]
     assert not (errors["ok"] & (err > 2.0)).any()  # no ok frame far off: the jump's place is never reported
+
+
+def test_the_readmes_table_of_flags_names_every_check_with_its_default():
+    # README.md, "Using semlab from a script": one row per flag, its keyword and default as LossOptions has them.
+    import dataclasses
+    import re
+    from pathlib import Path
+
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
+    rows = re.findall(r"^\| ([a-z ]+) \| .+ \| `(\w+)`(?: \(([\d.]+)(?: px)?\))? \|$", readme,
+                      flags=re.MULTILINE)
+    defaults = {f.name: f.default for f in dataclasses.fields(LossOptions)}
+    named = {keyword: value for _, keyword, value in rows if value}
+    assert set(named) == set(defaults) - {"min_score", "min_relative_score"}
+    assert all(float(value) == defaults[keyword] for keyword, value in named.items())
+    assert [reason for reason, _, _ in rows] == ["too uncertain", "inconsistent", "unresolved", "unexplained",
+                                                  "ambiguous", "in doubt", "slid"]
