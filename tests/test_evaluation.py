@@ -255,6 +255,18 @@ def test_a_refusal_or_a_crash_is_a_row_not_a_dead_run():
     assert track["ok"].tolist() == [True, False, False, False] and "RuntimeError: boom" in error
 
 
+class _CrashesAtStart:
+    def init(self, frame, roi):
+        raise RuntimeError("no connection")
+
+
+def test_a_crash_at_the_start_is_rows_not_a_dead_run():
+    frames = np.zeros((4, 32, 32), np.uint8)
+    track, ms, error = run_tracker(_CrashesAtStart, frames, (0, 0, 16, 16))
+    assert not track["ok"].any() and math.isnan(ms) and error == "init raised: RuntimeError: no connection"
+    assert track["reason"].eq(error).all()
+
+
 class _Still:
     """Reports the ROI centre (no motion) with a 0.1-px sigma: a tracker for a still probe."""
 

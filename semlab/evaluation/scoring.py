@@ -91,7 +91,8 @@ def run_tracker(factory, frames, roi) -> tuple[pd.DataFrame, float, str]:
         ``track``: ``frame, x, y, ok, sigma_x, sigma_y, reason`` (``reason``: why the frame is
         flagged, '' for an ok frame and frame 0); the mean ``update`` time in ms; and '' or why the
         run was cut short. A tracker that refuses to start (``init`` raises
-        ``ValueError``/``TypeError``) gives every frame ``ok=False`` with the refusal as its reason;
+        ``ValueError``/``TypeError``) or crashes there (any other exception) gives every frame
+        ``ok=False`` with the message as its reason;
         one that raises in ``update`` gets that frame ``ok=False`` with the exception as its reason,
         and the first such message is kept (a crash is a bug in the tracker, and the corpus reports
         it rather than dying on it).
@@ -103,8 +104,9 @@ def run_tracker(factory, frames, roi) -> tuple[pd.DataFrame, float, str]:
     try:
         tracker = factory()
         first = tracker.init(frames[0], roi)
-    except (ValueError, TypeError) as e:
-        error = f"init refused: {type(e).__name__}: {e}"
+    except Exception as e:  # noqa: BLE001 - a refusal (ValueError, TypeError) or a crash: the rows say which
+        error = (f"init refused: {type(e).__name__}: {e}" if isinstance(e, (ValueError, TypeError))
+                 else f"init raised: {type(e).__name__}: {e}")
         rows = [(k, nan, nan, False, nan, nan, error) for k in range(n)]
         return pd.DataFrame(rows, columns=_TRACK_COLUMNS), nan, error
     # frame 0 is the origin: nothing to flag
