@@ -29,6 +29,7 @@ __all__ = [
     "gradient_subpixel_shift",
     "keys_shift_filter",
     "keys_weights",
+    "median",
     "noise_variance",
     "sample_bicubic",
     "sample_shifted",
@@ -59,6 +60,9 @@ MIN_DAMPING = 0.125
 EARLY_STOP_RATIO = 0.6
 #: A gain below this is no image of the template: the iteration stops.
 MIN_GAIN = 1e-6
+#: The Keys stencil reads this many px before a pixel, and spans this many along each axis.
+KEYS_BEFORE = 1
+KEYS_STENCIL = 4
 
 
 def five_point_gradients(image) -> tuple[np.ndarray, np.ndarray]:
@@ -434,6 +438,21 @@ def _absorb(grad, inside, ind_in, ind_out):
     return grad - inside * (mean_in - mean_out) - mean_out
 
 
+def _sector_bins(sectors, setup: dict | None) -> tuple[np.ndarray, int]:
+    """``(bins, n)``: the sectors' labels with -1 (no level of its own) moved to the extra bin ``n``, and
+    ``n``, the number of sectors. Kept in ``setup`` (the template's constants) for the same ``sectors``
+    array: a tracker passes the same one at every call."""
+    cached = None if setup is None else setup.get("sector_bins")
+    if cached is not None and cached[0] is sectors:
+        return cached[1], cached[2]
+    sec = np.asarray(sectors, np.intp)
+    n_sec = int(sec.max()) + 1
+    bins = np.where(sec < 0, n_sec, sec)  # no local level: the extra bin, whose level stays 0
+    if setup is not None:
+        setup["sector_bins"] = (sectors, bins, n_sec)
+    return bins, n_sec
+
+
 def _median(x) -> float:
     """``np.median`` of a 1-D array without its overhead (the same value)."""
     n = x.size
@@ -444,7 +463,17 @@ def _median(x) -> float:
     return 0.5 * (float(part[k - 1]) + float(part[k]))
 
 
-def gauss_newton_setup(values, gx, gy, *, weights=None, regions=None, photometric: bool = True) -> dict:
+def median(x) -> float:
+    """``float(np.median(x))`` of a 1-D float64 array, the same value without numpy's overhead (a few µs
+    where the per-frame checks take many); numpy's own when ``x`` holds NaN or inf (NaN propagates)."""
+    x = np.asarray(x, np.float64)
+    if x.size == 0 or not math.isfinite(float(np.add.reduce(x))):
+        return float(np.median(x))
+    return _median(x)
+
+
+def gauss_newton_setup(values, gx, gy, *, weights=None, regions=None, photometric: bool = True,
+                       like: dict | None = None) -> dict:
     """What :func:`gauss_newton_translation` derives from the template alone, computed once.
 
     A tracker registers every frame against the same template pixels: passing this as
@@ -454,6 +483,9 @@ def gauss_newton_setup(values, gx, gy, *, weights=None, regions=None, photometri
     ----------
     values, gx, gy, weights, regions, photometric
         As in :func:`gauss_newton_translation`, and the same arrays as given to it.
+    like : dict, optional
+        A setup of the same ``values, gx, gy, regions`` arrays (the same objects) with other weights:
+        what does not depend on the weights is taken from it rather than computed again.
 
     Returns
     -------
@@ -473,22 +505,14 @@ def gauss_newton_setup(values, gx, gy, *, weights=None, regions=None, photometri
     out = {"t": t, "tx": tx, "ty": ty, "prior": prior, "sqrt_prior": np.sqrt(prior)}
     joint = photometric and regions is None
     two_level = photometric and regions is not None
+    key = (photometric, regions is None)
     if two_level:
         inside = np.asarray(regions, bool)
-        n_in = int(inside.sum())
-        if n_in == 0 or n_in == len(inside):
-            raise ValueError("regions must mark both object and background pixels")
-        ind_in = inside / n_in
-        ind_out = ~inside / (len(inside) - n_in)
-        if float(t @ ind_in) == float(t @ ind_out):
-            raise ValueError("the template has no contrast between object and background")
-        outside = (~inside).astype(np.float64)
-        inside_f = inside.astype(np.float64)
-        # Σ r·[inside·t, outside·t, inside, outside] for robust weights r: the weighted region
-        # means of the template in one product.
-        out.update(inside=inside, ind_in=ind_in, ind_out=ind_out,
-                   levels=np.stack([inside_f * t, outside * t, inside_f, outside], axis=1),
-                   regions2=np.stack([inside_f, outside], axis=1))
+        same = like is not None and like["key"] == key and all(like.get(k) is v for k, v in (
+            ("t", t), ("tx", tx), ("ty", ty), ("inside", inside)))
+        out.update({k: like[k] for k in _REGION_CONSTANTS} if same else _region_constants(t, tx, ty, inside))
+        if same and "sector_bins" in like:
+            out["sector_bins"] = like["sector_bins"]  # (:func:`_sector_bins`: kept with its sectors array)
     if not joint:
         # Everything but the robust weights is fixed during the iteration, so the 2×2 normal
         # matrix is g²·Σ robust·(prior·J·E) with E the plain or the level-absorbed gradient
@@ -497,11 +521,42 @@ def gauss_newton_setup(values, gx, gy, *, weights=None, regions=None, photometri
         ptx, pty = prior * tx, prior * ty
         out["plain_hess"] = np.stack([ptx * tx, ptx * ty, pty * tx, pty * ty], axis=1)
         if two_level:
-            ax, ay = _absorb(tx, inside, ind_in, ind_out), _absorb(ty, inside, ind_in, ind_out)
+            ax, ay = out["absorbed"]
             out["absorbed_hess"] = np.stack([ptx * ax, ptx * ay, pty * ax, pty * ay], axis=1)
         out["rhs_basis"] = np.stack([ptx, pty], axis=1)
-    out["key"] = (photometric, regions is None)
+    out["key"] = key
     return out
+
+
+#: The entries of :func:`gauss_newton_setup` that two-level photometry adds and the weights do not change.
+_REGION_CONSTANTS = ("inside", "ind_in", "ind_out", "levels", "regions2", "absorbed")
+
+
+def _region_constants(t, tx, ty, inside) -> dict:
+    """The two-level photometry's constants of :func:`gauss_newton_setup` (:data:`_REGION_CONSTANTS`).
+
+    Raises
+    ------
+    ValueError
+        ``inside`` marks only object or only background pixels, or the template has no contrast
+        between them.
+    """
+    n_in = int(inside.sum())
+    if n_in == 0 or n_in == len(inside):
+        raise ValueError("regions must mark both object and background pixels")
+    ind_in = inside / n_in
+    ind_out = ~inside / (len(inside) - n_in)
+    if float(t @ ind_in) == float(t @ ind_out):
+        raise ValueError("the template has no contrast between object and background")
+    outside = (~inside).astype(np.float64)
+    inside_f = inside.astype(np.float64)
+    # Σ r·[inside·t, outside·t, inside, outside] for robust weights r: the weighted region
+    # means of the template in one product.
+    return {"inside": inside, "ind_in": ind_in, "ind_out": ind_out,
+            "levels": np.stack([inside_f * t, outside * t, inside_f, outside], axis=1),
+            "regions2": np.stack([inside_f, outside], axis=1),
+            # The gradients less what the two levels absorb of them.
+            "absorbed": (_absorb(tx, inside, ind_in, ind_out), _absorb(ty, inside, ind_in, ind_out))}
 
 
 def gauss_newton_translation(image, points, values, gx, gy, shift0, *, weights=None, gain0=1.0,
@@ -624,16 +679,18 @@ class _GaussNewton:
         self.exact, self.curvature = exact, curvature
         self.sec = None
         if sectors is not None:
-            sec = np.asarray(sectors, np.intp)
-            self.n_sec = int(sec.max()) + 1
-            self.sec = np.where(sec < 0, self.n_sec, sec)  # no local level: the extra bin, whose level stays 0
+            self.sec, self.n_sec = _sector_bins(sectors, setup)
         if exact:
             # The crop is filtered once per iteration; the band's flat indices are fixed.
             self.rows, self.cols = img.shape
             ix0, iy0 = pts[:, 0].astype(np.intp), pts[:, 1].astype(np.intp)
             self.flat_base = iy0 * self.cols + ix0
             # (Column by column: numpy's axis-0 reductions of an (N, 2) array are several times slower.)
-            self.bounds = int(ix0.min()), int(ix0.max()), int(iy0.min()), int(iy0.max())
+            self.bounds = lo_x, hi_x, lo_y, hi_y = int(ix0.min()), int(ix0.max()), int(iy0.min()), int(iy0.max())
+            # Only the band's box and the Keys stencil around it are filtered (``_stencil_window``): the
+            # band's flat indices in that window do not depend on the shift.
+            self.window = (hi_x - lo_x + KEYS_STENCIL, hi_y - lo_y + KEYS_STENCIL)
+            self.window_base = (iy0 - lo_y + KEYS_BEFORE) * self.window[0] + (ix0 - lo_x + KEYS_BEFORE)
 
     def sample(self, shift) -> np.ndarray:
         """The image at the band's points moved by ``shift`` (Keys, or OpenCV's ``remap``)."""
@@ -643,8 +700,24 @@ class _GaussNewton:
         lo_x, hi_x, lo_y, hi_y = self.bounds
         if not (lo_x + fx >= 0 and lo_y + fy >= 0 and hi_x + fx < self.cols and hi_y + fy < self.rows):
             return sample_shifted_filtered(self.img, self.pts, shift)  # border replicated
+        window = self._stencil_window(fx, fy)
+        if window is not None:
+            filtered = keys_shift_filter(window, shift[0] - fx, shift[1] - fy)
+            return filtered.ravel().take(self.window_base).astype(np.float64)
         filtered = keys_shift_filter(self.img, shift[0] - fx, shift[1] - fy)
         return filtered.ravel().take(self.flat_base + (fy * self.cols + fx)).astype(np.float64)
+
+    def _stencil_window(self, fx: int, fy: int) -> np.ndarray | None:
+        """The part of the image that the band moved by the integer ``(fx, fy)`` reads through the Keys
+        stencil (its box, 1 px before and 2 after), or None when that reaches past the image's border
+        (there the whole image is filtered, its border replicated). Inside the image the filter's value at
+        a pixel is the same whatever part of the image is filtered (OpenCV's separable filter, bit for bit),
+        and a crop holds several times the band's pixels: the window is the cheaper one to filter."""
+        x0, y0 = self.bounds[0] + fx - KEYS_BEFORE, self.bounds[2] + fy - KEYS_BEFORE
+        w, h = self.window
+        if x0 < 0 or y0 < 0 or x0 + w > self.cols or y0 + h > self.rows:
+            return None
+        return self.img[y0:y0 + h, x0:x0 + w]
 
     def region_levels(self, robust, samples):
         """Gain and offset from the robust-weighted mean levels of object and background pixels,
@@ -661,15 +734,22 @@ class _GaussNewton:
 
     def residual(self, samples, g, o, robust) -> np.ndarray:
         """``I(x + p) − g·T − o``, less each background sector's weighted mean (its own level)."""
-        residual = samples - (g * self.t + o)
+        # (In place, in the same order of operations as ``samples - (g * T + o)``.)
+        residual = self.t * g
+        residual += o
+        np.subtract(samples, residual, out=residual)
         if self.sec is not None:
             # Each sector's own level: its weighted mean residual is the local background's
             # change, not the object's displacement.
             sec, n_sec = self.sec, self.n_sec
             sw = self.prior * robust
-            local = np.bincount(sec, weights=sw * residual, minlength=n_sec)[:n_sec] / np.maximum(
-                np.bincount(sec, weights=sw, minlength=n_sec)[:n_sec], 1e-12)
-            residual = residual - np.append(local, 0.0)[sec]
+            totals = np.bincount(sec, weights=sw, minlength=n_sec)[:n_sec]
+            sw *= residual
+            # The pixels without a level of their own (bin n_sec) take the extra entry, 0.
+            local = np.zeros(n_sec + 1)
+            np.divide(np.bincount(sec, weights=sw, minlength=n_sec)[:n_sec], np.maximum(totals, 1e-12),
+                      out=local[:n_sec])
+            residual -= local.take(sec)
         return residual
 
     def robust_weights(self, residual, huber, spread, tukey: bool):
@@ -757,8 +837,9 @@ class _GaussNewton:
     def run(self, shift0, gain0, offset0, *, max_iterations, tolerance, huber, tukey, template_variance,
             instrument, freeze, max_move, early_stop) -> GaussNewtonResult:
         """The inverse-compositional iteration from ``shift0``, ``gain0``, ``offset0``."""
-        p = np.array(shift0, np.float64)
-        start = p.copy()
+        # The position as two Python floats (the same float64 arithmetic, without numpy's scalar overhead).
+        p = [float(v) for v in np.asarray(shift0, np.float64)]
+        start = tuple(p)
         g, o = float(gain0), float(offset0)
         converged, step, spread, block, prev, damping = False, np.inf, None, None, None, 1.0
         robust = np.ones_like(self.t)
@@ -812,7 +893,7 @@ class _GaussNewton:
             # Huber re-weighting can make the last digits wander: a step well below a tenth of a
             # pixel after max_iterations still counts as converged.
             converged = step < 10 * tolerance
-        return self._result(p, g, o, robust, it, converged, samples, residual, hess)
+        return self._result(np.array(p), g, o, robust, it, converged, samples, residual, hess)
 
     def _result(self, p, g, o, robust, it, converged, samples, residual, hess) -> GaussNewtonResult:
         total = self.prior * robust

@@ -420,7 +420,9 @@ class BandModel:
         Only the full-resolution level is set up again: a refit starts at the answer.
         """
         weights = np.asarray(keep, np.float64) if self.weights is None else self.weights * keep
-        fine, _ = _setups(dataclasses.replace(self.fine, setup=None), [], weights, self.inside, options)
+        # (What does not depend on the weights is taken from the band's own set-up.)
+        fine, _ = _setups(dataclasses.replace(self.fine, setup=None), [], weights, self.inside, options,
+                          like=self.fine.setup)
         return dataclasses.replace(self, weights=weights, fine=fine,
                                    smoothed=tuple(dataclasses.replace(level, setup=None) for level in self.smoothed))
 
@@ -520,13 +522,14 @@ def _smoothed_levels(whitened, finest, at, coarse_sigma: float) -> list[tuple[fl
     return levels
 
 
-def _setups(fine: Level, smoothed: list[Level], weights, inside, options: TrackerOptions):
+def _setups(fine: Level, smoothed: list[Level], weights, inside, options: TrackerOptions, like: dict | None = None):
     """The levels with their Gauss–Newton constants; without any when one fails (a template
-    without two levels: every fit then says why)."""
+    without two levels: every fit then says why). ``like``: a set-up of ``fine`` with other weights
+    (:func:`~semlab.subpixel.gauss_newton_setup`)."""
     common = {"weights": weights, "photometric": options.photometry.photometric}
     try:
         regions = inside if options.photometry.photometry == "regions" else None
-        fine_setup = gauss_newton_setup(fine.values, fine.gx, fine.gy, **common, regions=regions)
+        fine_setup = gauss_newton_setup(fine.values, fine.gx, fine.gy, **common, regions=regions, like=like)
         setups = [gauss_newton_setup(level.values, level.gx, level.gy, **common, regions=inside)
                   for level in smoothed]
     except ValueError:

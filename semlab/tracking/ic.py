@@ -266,7 +266,7 @@ class ICMethod(TemplateLifecycle):
         fit = verdict.found
         if not isinstance(fit, FitResult) or not (
                 fit.inliers > AVERAGE_MIN_INLIERS and self.scores
-                and fit.score >= AVERAGE_MIN_SCORE_FRACTION * np.median(self.scores)):
+                and fit.score >= AVERAGE_MIN_SCORE_FRACTION * self._median_score()):
             return None
         self._learn_background(arr, fit)
         if self.averager is None:

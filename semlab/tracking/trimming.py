@@ -26,6 +26,8 @@ from typing import NamedTuple
 import numpy as np
 from scipy.special import chdtrc
 
+from ..subpixel import median
+
 __all__ = ["MAX_DROPPED_FRACTION", "MAX_DROPPED_TILES", "MIN_MISFIT_CONTRAST", "MISFIT_P_VALUE", "TileSums",
            "tile_p_values", "tile_rms", "tile_sums", "trim_misfit_tiles", "typical_tile_variance"]
 
@@ -79,7 +81,7 @@ def typical_tile_variance(sums: TileSums) -> float:
     """The median over the band's tiles of their mean weighted squared residual: the scale a tile is
     judged against (robust to the few misfit tiles, and to a misfit the whole band shares)."""
     full = sums.dof >= MIN_TILE_PIXELS
-    return float(np.median(sums.weighted[full] / sums.dof[full])) if full.any() else float("nan")
+    return median(sums.weighted[full] / sums.dof[full]) if full.any() else float("nan")
 
 
 def tile_p_values(sums: TileSums, noise_variance: float, only=None) -> np.ndarray:

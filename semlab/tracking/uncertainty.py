@@ -33,6 +33,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..subpixel import median
 from .consistency import Influence
 
 __all__ = [
@@ -290,8 +291,8 @@ class RecentPrecision:
         self.recent.append(own)
         if len(self.recent) < MIN_RECENT_FRAMES:
             return own
-        typical = np.median(np.asarray(self.recent), axis=0)
-        return max(own[0], float(typical[0])), max(own[1], float(typical[1]))
+        recent = np.asarray(self.recent)
+        return max(own[0], median(recent[:, 0])), max(own[1], median(recent[:, 1]))
 
 
 def young_template_inflation(n_averaged: int) -> float:
