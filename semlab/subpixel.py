@@ -165,11 +165,18 @@ def sample_bicubic(image, xs, ys) -> np.ndarray:
     # taps[j, i]: the pixel of stencil row j, column i, for every point.
     taps = img.ravel().take(iy[:, None, :] * cols + ix[None, :, :])
     weighted = wx[None, :, :] * taps
+    # ((w0 + w1) + w2) + w3 per stencil row, times its weight, summed row after row (in place).
     out = None
     for j in range(4):
         row = weighted[j]
-        acc = ((row[0] + row[1]) + row[2]) + row[3]
-        out = wy[j] * acc if out is None else out + wy[j] * acc
+        acc = np.add(row[0], row[1])
+        acc += row[2]
+        acc += row[3]
+        acc *= wy[j]
+        if out is None:
+            out = acc
+        else:
+            out += acc
     return out
 
 
@@ -683,8 +690,8 @@ class _GaussNewton:
         if exact:
             # The crop is filtered once per iteration; the band's flat indices are fixed.
             self.rows, self.cols = img.shape
-            ix0, iy0 = pts[:, 0].astype(np.intp), pts[:, 1].astype(np.intp)
-            self.flat_base = iy0 * self.cols + ix0
+            self.ix0, self.iy0 = ix0, iy0 = pts[:, 0].astype(np.intp), pts[:, 1].astype(np.intp)
+            self.flat_base = None  # the band's flat indices in the whole image (made when first needed)
             # (Column by column: numpy's axis-0 reductions of an (N, 2) array are several times slower.)
             self.bounds = lo_x, hi_x, lo_y, hi_y = int(ix0.min()), int(ix0.max()), int(iy0.min()), int(iy0.max())
             # Only the band's box and the Keys stencil around it are filtered (``_stencil_window``): the
@@ -704,6 +711,8 @@ class _GaussNewton:
         if window is not None:
             filtered = keys_shift_filter(window, shift[0] - fx, shift[1] - fy)
             return filtered.ravel().take(self.window_base).astype(np.float64)
+        if self.flat_base is None:
+            self.flat_base = self.iy0 * self.cols + self.ix0
         filtered = keys_shift_filter(self.img, shift[0] - fx, shift[1] - fy)
         return filtered.ravel().take(self.flat_base + (fy * self.cols + fx)).astype(np.float64)
 

@@ -114,6 +114,7 @@ class ICMethod(TemplateLifecycle):
         """The frame with the static background's texture taken off where the template, at the
         prediction, is background (:meth:`~semlab.tracking.layer.BackgroundLayer.detextured`), once the
         layer acts and while the prediction holds (a jump's frame is registered as it came)."""
+        self._new_frame()
         detexture = self.layer_on and motion.prediction_error < STEADY_PX
         model = self.models[detexture]
         if model is not self.model:

@@ -27,7 +27,7 @@ from .consistency import band_quadrants
 from .layer import GATE_PX, MIN_TEXTURE, BackgroundLayer, far_from_region, far_px, object_support
 from .method import Method, Setup
 from .pieces import LoosePieces
-from .registration import FitResult, Start, register
+from .registration import FitResult, FrameCrops, Start, register
 from .search import coarse_mask, coarse_template
 from .trimming import MIN_MISFIT_CONTRAST, trim_misfit_tiles
 from .uncertainty import band_tiles
@@ -58,6 +58,8 @@ class TemplateLifecycle(Method):
         self._coarse_mask = None
         #: The last accepted fit, when tiles were trimmed from it, and the band model it used.
         self._trimmed = (None, None)
+        #: The crops of the frame being registered (cleared for each frame: :meth:`_new_frame`).
+        self._crops = FrameCrops()
         self._build()
         if self.layer is not None:
             self.layer.add(setup.image, np.zeros(2), 1.0, 0.0, self.rho, self.far)
@@ -125,8 +127,12 @@ class TemplateLifecycle(Method):
         #: The band's template gradients (K, 2), the Jacobian up to the fit's gain.
         self.gradients = np.stack([model.fine.gx, model.fine.gy], axis=1)
 
+    def _new_frame(self) -> None:
+        """A new frame is registered: the last one's crops are forgotten."""
+        self._crops.clear()
+
     def _register(self, arr, start: Start, **kw) -> FitResult:
-        return register(arr, self.model, start, self.roi, self.options, **kw)
+        return register(arr, self.model, start, self.roi, self.options, crops=self._crops, **kw)
 
     def _register_stored(self, stored) -> FitResult:
         """A stored frame (as it came: no texture taken off) registered against the flattened template once
@@ -150,7 +156,7 @@ class TemplateLifecycle(Method):
         def refit(keep, last):
             models.append((keep, self.model.reweighted(keep, self.options)))
             return register(arr, models[-1][1], Start(last.shift, last.gain, last.offset), self.roi, self.options,
-                            at=at, robust_start=False)
+                            at=at, robust_start=False, crops=self._crops)
 
         trimmed, keep = trim_misfit_tiles(fit, refit, self.tiles, self.model.weights, p_value,
                                           floor=MIN_MISFIT_CONTRAST * abs(fit.gain) * self.contrast)
@@ -170,7 +176,7 @@ class TemplateLifecycle(Method):
 
         def without(mask):
             return register(arr, self.model.reweighted(~mask, self.options), Start(fit.shift, fit.gain, fit.offset),
-                            self.roi, self.options, robust_start=False)
+                            self.roi, self.options, robust_start=False, crops=self._crops)
 
         for index, rest in self.pieces.pulling_pieces(self.model.points, fit.shift, without):
             cut = self.pieces.cut_off(self.contour, index, self.widths, choose=self.options.template.choose or "central")

@@ -26,7 +26,8 @@ from .band import BandModel
 from .frames import crop as crop_frame
 from .options import TrackerOptions
 
-__all__ = ["CROP_MARGIN_PX", "STAGE1_TOLERANCE", "BandCrop", "FitResult", "OffImage", "Start", "band_crop", "register"]
+__all__ = ["CROP_MARGIN_PX", "STAGE1_TOLERANCE", "BandCrop", "FitResult", "FrameCrops", "OffImage", "Start", "band_crop",
+           "register"]
 
 
 class OffImage(ValueError):
@@ -176,10 +177,39 @@ class BandCrop:
     centre: np.ndarray
 
 
-def band_crop(arr, model: BandModel, shift, roi, margin: int, at=(0, 0)) -> BandCrop:
+class FrameCrops:
+    """The crops of a frame around the band, plain and whitened, kept while that frame is registered.
+
+    One frame is registered several times at nearly the same place (from the prediction, again without
+    its misfit tiles, without a loose piece; a stored frame once per refreshed template): the crop and its
+    whitening are the same each time. The owner calls :meth:`clear` before each new frame, so that a
+    frame array the caller fills anew in place is never read from here.
+    """
+
+    def __init__(self) -> None:
+        self._crops: dict = {}
+
+    def clear(self) -> None:
+        self._crops = {}
+
+    def get(self, arr, box, rho: float) -> tuple[np.ndarray, np.ndarray]:
+        """``(image, whitened)``: ``arr[y0:y1, x0:x1]`` as float32 (:func:`~semlab.tracking.frames.crop`) and
+        :func:`~semlab.subpixel.whiten_lines` of it with ``rho``, for ``box`` ``(x0, y0, x1, y1)``. Read only."""
+        key = (id(arr), box, rho)
+        kept = self._crops.get(key)
+        if kept is not None and kept[0] is arr:
+            return kept[1], kept[2]
+        image = crop_frame(arr, *box)
+        whitened = whiten_lines(image, rho)
+        self._crops[key] = (arr, image, whitened)
+        return image, whitened
+
+
+def band_crop(arr, model: BandModel, shift, roi, margin: int, at=(0, 0), crops: FrameCrops | None = None) -> BandCrop:
     """The crop of ``arr`` around the band at ``shift``, ``margin`` px each side.
 
-    ``arr`` is the frame, or a part of it whose pixel [0, 0] is the frame's pixel ``at``.
+    ``arr`` is the frame, or a part of it whose pixel [0, 0] is the frame's pixel ``at``; ``crops``: where
+    this frame's crops are kept (None: made anew).
 
     Raises
     ------
@@ -194,8 +224,11 @@ def band_crop(arr, model: BandModel, shift, roi, margin: int, at=(0, 0)) -> Band
     cy1 = min(y0 + by1 + sy + margin, arr.shape[0])
     if cx1 - cx0 < MIN_CROP_PX or cy1 - cy0 < MIN_CROP_PX:
         raise OffImage("the target is outside the image")
-    image = crop_frame(arr, cx0, cy0, cx1, cy1)
-    whitened = whiten_lines(image, model.rho)
+    if crops is None:
+        image = crop_frame(arr, cx0, cy0, cx1, cy1)
+        whitened = whiten_lines(image, model.rho)
+    else:
+        image, whitened = crops.get(arr, (cx0, cy0, cx1, cy1), model.rho)
     pts = model.points + (x0 - cx0, y0 - cy0)
     # Band pixels that have left the image (the object near its border) drop out; the band's
     # bounding box tells whether any has.
@@ -275,7 +308,8 @@ def _full_resolution(crop: BandCrop, start: Start, options: TrackerOptions, *, l
 
 
 def register(arr, model: BandModel, start: Start, roi, options: TrackerOptions, *, margin: int = CROP_MARGIN_PX,
-             at=(0, 0), robust_start: bool = True, max_move: float | None = None, give_up: bool = False) -> FitResult:
+             at=(0, 0), robust_start: bool = True, max_move: float | None = None, give_up: bool = False,
+             crops: FrameCrops | None = None) -> FitResult:
     """Fit shift, gain and offset of ``model`` to ``arr`` from ``start``.
 
     Parameters
@@ -302,6 +336,8 @@ def register(arr, model: BandModel, start: Start, roi, options: TrackerOptions, 
         is left out once the template is averaged, and the full-resolution stage runs in a crop
         centred on its start. Without it (a start from a search, the last resort) the smoothed
         stage runs in full.
+    crops : FrameCrops or None
+        Where the crops of ``arr`` are kept while it is registered (None: made anew).
 
     Raises
     ------
@@ -311,7 +347,7 @@ def register(arr, model: BandModel, start: Start, roi, options: TrackerOptions, 
     """
     careful = robust_start and not give_up
     reach = margin - STENCIL_MARGIN_PX
-    crop = band_crop(arr, model, start.shift, roi, margin, at)
+    crop = band_crop(arr, model, start.shift, roi, margin, at, crops)
     mature = model.jacobian_sigma <= MATURE_JACOBIAN_SIGMA
     if model.smoothed and robust_start:
         start = _ladder(crop, start, options, reach=reach, careful=careful, give_up=give_up, mature=mature)
@@ -319,6 +355,6 @@ def register(arr, model: BandModel, start: Start, roi, options: TrackerOptions, 
             return start
         if not careful and np.any(np.round(start.shift) != crop.centre):
             # Stage 2 in a crop centred on its start (the same pixels, whitened alike).
-            crop = band_crop(arr, model, start.shift, roi, margin, at)
+            crop = band_crop(arr, model, start.shift, roi, margin, at, crops)
     limit = reach if max_move is None else min(reach, max_move)
     return _full_resolution(crop, start, options, limit=limit, careful=careful, mature=mature)
