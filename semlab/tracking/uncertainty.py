@@ -351,14 +351,18 @@ def position_sigma(frame_cov, origin_cov=None, *, model_sd: float = 0.0,
     (float, float)
         ``inf`` where a covariance is not finite.
     """
-    cov = np.array(frame_cov, float)
+    # The two variances on Python floats (the same float64 sums as the matrices', a frame's worth of
+    # numpy calls fewer).
+    frame = np.asarray(frame_cov, float)
+    var = [float(frame[0, 0]), float(frame[1, 1])]
     if origin_cov is not None:
-        cov = cov + np.asarray(origin_cov, float)
-    var = np.diag(cov) + model_sd * model_sd
-    if not np.all(np.isfinite(var)) or np.any(var < 0):
+        origin = np.asarray(origin_cov, float)
+        var = [var[0] + float(origin[0, 0]), var[1] + float(origin[1, 1])]
+    model_var = model_sd * model_sd
+    var = [v + model_var for v in var]
+    if not all(math.isfinite(v) and v >= 0 for v in var):
         return math.inf, math.inf
-    sx, sy = (calibration * math.sqrt(v) for v in var)
-    return sx, sy
+    return calibration * math.sqrt(var[0]), calibration * math.sqrt(var[1])
 
 
 def unresolved(contrast_noise: float, limit: float = MIN_RESOLVED_CONTRAST) -> bool:
