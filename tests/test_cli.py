@@ -560,3 +560,25 @@ def test_track_sigma_adds_the_libraries_uncertainty(tmp_path):
     np.testing.assert_allclose(df[["sigma_x", "sigma_y"]], ref[["sigma_x", "sigma_y"]], atol=6e-7)  # six decimals
     ok = df["ok"].to_numpy()
     assert ok[1:].any() and (df.loc[ok, "sigma_x"].iloc[1:] > 0).all()
+
+
+def test_track_reason_says_why_a_frame_is_not_ok(tmp_path):
+    # --reason: the library's reason (semlab.tracking.run.track_with_reasons) after the contract's columns; a
+    # frame without the probe is lost and says why, the others are ok and say nothing.
+    from semlab.tracking.run import track_with_reasons
+
+    frames = _probe_frames(5)
+    frames[3] = np.full_like(frames[3], int(np.median(frames[3])))
+    folder = _write_seq(tmp_path / "seq", frames)
+    out = tmp_path / "r.csv"
+    roi = (40, 30, 61, 51)
+    code = main(["track", str(folder), "--roi", ",".join(map(str, roi)), "--reason", "--out", str(out),
+                 "--no-progress", "--quiet"])  # fmt: skip
+    assert code == EXIT_OK
+    df = pd.read_csv(out, keep_default_na=False)
+    assert list(df.columns) == [*COLUMNS, "reason"]
+    assert not df.loc[3, "ok"] and df.loc[3, "reason"] != ""
+    assert (df.loc[df["ok"], "reason"] == "").all() and df["ok"].sum() == 4
+    ref = track_with_reasons(np.stack(frames), roi, progress=False)
+    assert list(ref.columns) == ["frame", "x", "y", "score", "ok", "sigma_x", "sigma_y", "reason"]
+    assert df["reason"].tolist() == ref["reason"].tolist()

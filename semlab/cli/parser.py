@@ -120,6 +120,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="add each frame's standard uncertainty: columns sigma_x, sigma_y (px) after the others "
         "(empty where the frame is not ok)",
     )
+    t.add_argument(
+        "--reason",
+        action="store_true",
+        help="add why each frame is not ok (lost, or flagged: too uncertain, ambiguous, ...): column reason, "
+        "last (empty where the frame is ok)",
+    )
     t.add_argument("--no-progress", action="store_true", help="no progress bars on stderr")
     t.add_argument("--quiet", "-q", action="store_true", help="no summary on stdout")
 

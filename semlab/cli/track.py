@@ -36,7 +36,7 @@ the pixel size; they are empty when the pixel size is unknown (PNG/JPEG/video, T
 metadata) and --pixel-size is not given. score is the tracker's match quality in [0, 1]; ok=False
 (with empty x, y) marks frames where the target was lost or its answer was too uncertain to trust
 (semlab's tracker, the default). --sigma adds sigma_x, sigma_y: each frame's standard uncertainty
-(px) as the tracker estimates it.
+(px) as the tracker estimates it. --reason adds reason, last: why a frame is not ok.
 
 Next to OUT the command writes OUT.json: semlab version, command line, method and parameters, ROI,
 pixel size and where it came from, every input file with its SHA-256, frame count, times, and the
@@ -155,7 +155,7 @@ def _cmd_track(args, argv) -> int:
                 order="given" if args.keep_order else "natural")
     _note_reordering(seq)
     roi, roi_source = _track_roi(args, seq)
-    res = _track_table(_run_tracker(args, seq, roi, params), seq, sigma=args.sigma)
+    res = _track_table(_run_tracker(args, seq, roi, params), seq, sigma=args.sigma, reason=args.reason)
 
     def record(tmp_csv: Path) -> dict:
         return _track_record(args, argv, params, seq, res, roi, roi_source, out, tmp_csv, started)
@@ -189,10 +189,11 @@ def _track_roi(args, seq) -> tuple[tuple, str]:
 
 
 def _run_tracker(args, seq, roi, params):
-    from semlab.tracking import track
+    from semlab.tracking.run import track, track_with_reasons
 
+    run = track_with_reasons if args.reason else track
     try:
-        df = track(seq.frames, roi, method=args.method, progress=not args.no_progress, **params)
+        df = run(seq.frames, roi, method=args.method, progress=not args.no_progress, **params)
     except (TypeError, ValueError) as e:
         msg = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
         raise _CLIError(
@@ -203,9 +204,9 @@ def _run_tracker(args, seq, roi, params):
     return df
 
 
-def _track_table(df, seq, *, sigma=False):
+def _track_table(df, seq, *, sigma=False, reason=False):
     """The CSV's table: the track in px and nm, and each frame's file (and, with ``sigma``, each
-    frame's standard uncertainty in px)."""
+    frame's standard uncertainty in px; with ``reason``, last, why a frame is not ok)."""
     import numpy as np
     import pandas as pd
 
@@ -225,6 +226,8 @@ def _track_table(df, seq, *, sigma=False):
     if sigma:
         for axis in ("sigma_x", "sigma_y"):
             table[axis] = df[axis].astype(float).to_numpy()
+    if reason:
+        table["reason"] = df["reason"].astype(str).to_numpy()
     return table
 
 

@@ -82,8 +82,9 @@ from .band import DEFAULT_BAND_PX, DENOISE_FROM_FRAMES, MIN_BAND_PIXELS, NARROW_
 from .options import DEFAULT_METHOD, METHODS
 from .registration import STAGE1_TOLERANCE
 from .result import TrackResult
-from .run import track
+from .run import track, track_with_reasons
 from .tracker import Tracker
 
 __all__ = ["DEFAULT_BAND_PX", "DEFAULT_METHOD", "DENOISE_FROM_FRAMES", "METHODS", "MIN_BAND_PIXELS",
-           "NARROW_BAND_TEXTURE", "STAGE1_TOLERANCE", "TrackResult", "Tracker", "track"]
+           "NARROW_BAND_TEXTURE", "STAGE1_TOLERANCE", "TrackResult", "Tracker", "track",
+           "track_with_reasons"]

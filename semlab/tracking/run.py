@@ -12,7 +12,7 @@ from .options import DEFAULT_METHOD
 from .result import TrackResult
 from .tracker import Tracker
 
-__all__ = ["follow_frames", "start_trackers", "track"]
+__all__ = ["follow_frames", "start_trackers", "track", "track_with_reasons"]
 
 #: Sequences longer than this show a progress bar unless told otherwise.
 PROGRESS_FROM_FRAMES = 50
@@ -76,6 +76,11 @@ def track(frames, roi, *, method: str = DEFAULT_METHOD, progress: bool | None = 
     >>> df["x"].round(1).tolist(), bool(df["ok"].all())
     ([149.5, 150.5, 151.5], True)
     """
+    return _track(frames, roi, method, progress, params, reasons=False)
+
+
+def _track(frames, roi, method: str, progress: bool | None, params: dict, *, reasons: bool) -> pd.DataFrame:
+    """:func:`track` (with ``reasons``: :func:`track_with_reasons`)."""
     rois = list(roi) if is_roi_list(roi) else None
     iterator, n = iter_frames(frames)
     try:
@@ -90,9 +95,20 @@ def track(frames, roi, *, method: str = DEFAULT_METHOD, progress: bool | None = 
 
         iterator = tqdm(iterator, total=None if n is None else n - 1, desc=f"tracking ({method})")
     rows += follow_frames(trackers, iterator)
-    df = pd.DataFrame([(i, k, r.x, r.y, r.score, r.ok, r.sigma_x, r.sigma_y) for i, k, r in rows],
-                      columns=["frame", "target", "x", "y", "score", "ok", "sigma_x", "sigma_y"])
+    df = pd.DataFrame([(i, k, r.x, r.y, r.score, r.ok, r.sigma_x, r.sigma_y, "" if r.ok else (r.reason or ""))
+                       for i, k, r in rows],
+                      columns=["frame", "target", "x", "y", "score", "ok", "sigma_x", "sigma_y", "reason"])
     df["ok"] = df["ok"].astype(bool)
     if rois is None:
-        return df.drop(columns="target")
-    return df.sort_values(["frame", "target"], kind="stable").reset_index(drop=True)
+        df = df.drop(columns="target")
+    else:
+        df = df.sort_values(["frame", "target"], kind="stable").reset_index(drop=True)
+    return df if reasons else df.drop(columns="reason")
+
+
+def track_with_reasons(frames, roi, *, method: str = DEFAULT_METHOD, progress: bool | None = None,
+                       **params) -> pd.DataFrame:
+    """:func:`track`'s table with a last column ``reason``: why a frame's ``ok`` is False (the
+    :class:`~semlab.tracking.result.TrackResult`'s: lost, or a flag of :mod:`semlab.tracking.trust`), ''
+    where it is ok. Parameters, returns and raises as :func:`track`'s."""
+    return _track(frames, roi, method, progress, params, reasons=True)
