@@ -541,6 +541,20 @@ def test_unknown_pixel_size_names_the_flag(tmp_path, capsys):
     assert "pass --pixel-size NM" in out and "pixel_size_nm" not in out
 
 
+#: The ROI of the probe of :func:`_probe_frames` the --sigma and --reason tests track.
+TRACKED_ROI = (40, 30, 61, 51)
+
+
+def _tracked_csv(tmp_path, frames, *flags) -> pd.DataFrame:
+    """``semlab track`` of ``frames`` (written as a folder) in :data:`TRACKED_ROI` with ``flags``: its CSV."""
+    folder = _write_seq(tmp_path / "seq", frames)
+    out = tmp_path / "t.csv"
+    code = main(["track", str(folder), "--roi", ",".join(map(str, TRACKED_ROI)), *flags, "--out", str(out),
+                 "--no-progress", "--quiet"])  # fmt: skip
+    assert code == EXIT_OK
+    return pd.read_csv(out)
+
+
 def test_track_sigma_adds_the_libraries_uncertainty(tmp_path):
     # --sigma: the same sigma_x, sigma_y as semlab.track on the same frames (the CLI and the library
     # agree), after the contract's columns; a noisy blob so that the uncertainty is not zero.
@@ -548,15 +562,9 @@ def test_track_sigma_adds_the_libraries_uncertainty(tmp_path):
 
     rng = np.random.default_rng(7)
     frames = [np.clip(f + rng.normal(0, 6, f.shape), 0, 255).round().astype(np.uint8) for f in _probe_frames(5)]
-    folder = _write_seq(tmp_path / "seq", frames)
-    out = tmp_path / "s.csv"
-    roi = (40, 30, 61, 51)
-    code = main(["track", str(folder), "--roi", ",".join(map(str, roi)), "--sigma", "--out", str(out),
-                 "--no-progress", "--quiet"])  # fmt: skip
-    assert code == EXIT_OK
-    df = pd.read_csv(out)
+    df = _tracked_csv(tmp_path, frames, "--sigma")
     assert list(df.columns) == [*COLUMNS, "sigma_x", "sigma_y"]
-    ref = semlab.track(np.stack(frames), roi, progress=False)
+    ref = semlab.track(np.stack(frames), TRACKED_ROI, progress=False)
     np.testing.assert_allclose(df[["sigma_x", "sigma_y"]], ref[["sigma_x", "sigma_y"]], atol=6e-7)  # six decimals
     ok = df["ok"].to_numpy()
     assert ok[1:].any() and (df.loc[ok, "sigma_x"].iloc[1:] > 0).all()
@@ -569,16 +577,11 @@ def test_track_reason_says_why_a_frame_is_not_ok(tmp_path):
 
     frames = _probe_frames(5)
     frames[3] = np.full_like(frames[3], int(np.median(frames[3])))
-    folder = _write_seq(tmp_path / "seq", frames)
-    out = tmp_path / "r.csv"
-    roi = (40, 30, 61, 51)
-    code = main(["track", str(folder), "--roi", ",".join(map(str, roi)), "--reason", "--out", str(out),
-                 "--no-progress", "--quiet"])  # fmt: skip
-    assert code == EXIT_OK
-    df = pd.read_csv(out, keep_default_na=False)
+    df = _tracked_csv(tmp_path, frames, "--reason")
     assert list(df.columns) == [*COLUMNS, "reason"]
+    df["reason"] = df["reason"].fillna("")  # an empty field reads as NaN
     assert not df.loc[3, "ok"] and df.loc[3, "reason"] != ""
     assert (df.loc[df["ok"], "reason"] == "").all() and df["ok"].sum() == 4
-    ref = track_with_reasons(np.stack(frames), roi, progress=False)
+    ref = track_with_reasons(np.stack(frames), TRACKED_ROI, progress=False)
     assert list(ref.columns) == ["frame", "x", "y", "score", "ok", "sigma_x", "sigma_y", "reason"]
     assert df["reason"].tolist() == ref["reason"].tolist()
