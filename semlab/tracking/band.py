@@ -19,12 +19,12 @@ import cv2
 import numpy as np
 from skimage.restoration import denoise_nl_means
 
+from ..gauss_newton import gauss_newton_setup
 from ..subpixel import (
     FIVE_POINT_KERNEL,
     MAD_TO_SD,
     NoiseModel,
     five_point_gradients,
-    gauss_newton_setup,
     whiten_lines,
 )
 from ..template import ContourTemplate
@@ -525,7 +525,7 @@ def _smoothed_levels(whitened, finest, at, coarse_sigma: float) -> list[tuple[fl
 def _setups(fine: Level, smoothed: list[Level], weights, inside, options: TrackerOptions, like: dict | None = None):
     """The levels with their Gauss–Newton constants; without any when one fails (a template
     without two levels: every fit then says why). ``like``: a set-up of ``fine`` with other weights
-    (:func:`~semlab.subpixel.gauss_newton_setup`)."""
+    (:func:`~semlab.gauss_newton.gauss_newton_setup`)."""
     common = {"weights": weights, "photometric": options.photometry.photometric}
     try:
         regions = inside if options.photometry.photometry == "regions" else None

@@ -2,7 +2,7 @@
 
 :func:`register` is the one fit every "ic" step uses (tracking from the prediction, from a
 coarse-search candidate, after a re-acquisition, and the re-registration of stored frames when
-the template is averaged): inverse-compositional Gauss–Newton (:func:`semlab.subpixel.
+the template is averaged): inverse-compositional Gauss–Newton (:func:`semlab.gauss_newton.
 gauss_newton_translation`, eq. 2 with the paper's offline matrix ``M₀`` of eqs. 4-5 as its
 Jacobian) on the band of a whitened crop around the start, first down the coarse-to-fine ladder
 of the model's smoothed levels (a wide basin), then at full resolution (the efficient estimate).
@@ -15,13 +15,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from ..subpixel import (
-    GaussNewtonResult,
-    five_point_gradients,
-    gauss_newton_translation,
-    weighted_ncc,
-    whiten_lines,
-)
+from ..gauss_newton import GaussNewtonResult, gauss_newton_translation
+from ..subpixel import five_point_gradients, weighted_ncc, whiten_lines
 from .band import BandModel
 from .frames import crop as crop_frame
 from .options import TrackerOptions
@@ -99,9 +94,9 @@ class FitResult:
     weight_total : float
         Their robust weights' total.
     robust_ssr : float
-        The residuals' squared influence (:class:`semlab.subpixel.GaussNewtonResult`).
+        The residuals' squared influence (:class:`semlab.gauss_newton.GaussNewtonResult`).
     information : ndarray or None
-        The shift's information (:class:`semlab.subpixel.GaussNewtonResult`).
+        The shift's information (:class:`semlab.gauss_newton.GaussNewtonResult`).
     residual, weights : (K,) ndarray or None
         The last stage's residuals and robust weights at the band's pixels.
     """
@@ -343,7 +338,7 @@ def register(arr, model: BandModel, start: Start, roi, options: TrackerOptions, 
     ------
     ValueError
         The target is outside the image (:class:`OffImage`, :func:`band_crop`), or the template has no usable
-        levels (:func:`semlab.subpixel.gauss_newton_setup`).
+        levels (:func:`semlab.gauss_newton.gauss_newton_setup`).
     """
     careful = robust_start and not give_up
     reach = margin - STENCIL_MARGIN_PX

@@ -1,6 +1,6 @@
 """Misfit tiles: the parts of the band the template does not explain are dropped and the frame refitted.
 
-Huber's loss (:func:`semlab.subpixel.gauss_newton_translation`) bounds what one pixel can do, not
+Huber's loss (:func:`semlab.gauss_newton.gauss_newton_translation`) bounds what one pixel can do, not
 what a few dozen neighbouring ones can: a particle over the apex, the rim of an occluder across the
 shaft, debris drifting through the band each bring a patch of pixels that are all off by a few noise
 standard deviations, each inside Huber's linear range, and together they pull the answer along the
